@@ -1,0 +1,229 @@
+"""DREM parameter estimator and I&I speed observer (paper Sec. IV-B and Appendix B).
+
+Swing equation (paper Eq. 5): d^2 delta/dt^2 = -a1 d delta/dt + a2 (Tm - Te). Filtering with
+
+    F = l1 l2 l3 / ((s + l1)(s + l2)(s + l3))
+
+gives the linear regression z = theta^T psi with theta = [a1, a2],
+
+    z = F[s^2 delta],   psi = [-F[s delta], F[Tm - Te]]                         (App. Eq. 17)
+
+The regressor is extended with H = K [1, c1 c2 s / ((s + c1)(s + c2))]^T    (Sec. IV-B.2)
+
+    Z = H[z],  Psi = H[psi^T],  Delta = det Psi,  Zc = adj(Psi) Z = Delta theta   (Eq. 18-19)
+
+and each parameter is updated by the scalar law (Eq. 20-21)
+
+    d theta_j/dt = -gamma_j K_j Delta (Delta theta_j - Zc_j),
+    K_j = clip(Delta_ref^2 / mean(Delta^2), eps, k_max),
+
+with mean(Delta^2) an exponential moving mean over ``window_s``. The I&I observer (Lemma 2):
+
+    dxI/dt = -(a1_hat + k)(xI + k delta) + a2_hat (Tm - Te),   x2_hat = xI + k delta.
+
+All of it is one ODE, integrated with diffrax over the sample intervals (``_integrate``).
+The error obeys theta_j - theta_hat_j = exp(-int gamma_j K_j Delta^2) (theta_j - theta_j(0))
+for noise-free data; that exponent is integrated too and reported as the excitation
+("log contraction"): it tells whether the data excited the estimator at all.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from ._governor import AbstractGovernor
+from ._integrate import Integrator, integrate_sampled
+from ._units import as_float, check_positive
+
+
+class ObserverConfig(eqx.Module):
+    """Tuning of the DREM estimator and the I&I observer. Defaults: the paper's Table I."""
+
+    lambda1: Float[Array, ""] = eqx.field(converter=as_float, default=8.0)
+    """Pole of the 3rd-order filter F [1/s]."""
+    lambda2: Float[Array, ""] = eqx.field(converter=as_float, default=6.2)
+    """Pole of F [1/s]."""
+    lambda3: Float[Array, ""] = eqx.field(converter=as_float, default=7.4)
+    """Pole of F [1/s]."""
+    c1: Float[Array, ""] = eqx.field(converter=as_float, default=8.0)
+    """Pole of the derivative branch of the regressor extension H [1/s]."""
+    c2: Float[Array, ""] = eqx.field(converter=as_float, default=6.0)
+    """Pole of the derivative branch of H [1/s]. (Table I also lists c3 = 7; H has no c3.)"""
+    k_ext: Float[Array, ""] = eqx.field(converter=as_float, default=6.5)
+    """Gain K of the regressor extension H [-]."""
+    gamma1: Float[Array, ""] = eqx.field(converter=as_float, default=850.0)
+    """Adaptation gain gamma_1 of a1."""
+    gamma2: Float[Array, ""] = eqx.field(converter=as_float, default=850.0)
+    """Adaptation gain gamma_2 of a2."""
+    k_obs: Float[Array, ""] = eqx.field(converter=as_float, default=8.0)
+    """I&I observer gain k [1/s]."""
+    eps: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """Lower bound epsilon of the adaptive gain K_j [-]."""
+    k_max: Float[Array, ""] = eqx.field(converter=as_float, default=100.0)
+    """Upper bound of the adaptive gain K_j [-] (100 in the paper)."""
+    window_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """Time constant of the moving mean of Delta^2 [s]."""
+    delta_ref_sq: Float[Array, ""] = eqx.field(converter=as_float, default=3e-5)
+    """Delta_ref^2 of the adaptive gain K_j = Delta_ref^2 / mean(Delta^2). The paper gives no
+    value; 3e-5 makes gamma Delta_ref^2 ~ 0.026 1/s, i.e. about 90 s to converge on the demo,
+    as in the paper. Scale it with gamma to trade convergence speed against noise."""
+    a1_init: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """Initial estimate of a1 [1/s]."""
+    a2_init: Float[Array, ""] = eqx.field(converter=as_float, default=40.0)
+    """Initial estimate of a2 [rad/s^2 per pu]."""
+
+    def __check_init__(self):
+        check_positive(self, "lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1",
+                       "gamma2", "k_obs", "eps", "k_max", "window_s", "delta_ref_sq", "a2_init")
+
+
+class DremInputs(NamedTuple):
+    """Sampled inputs of the observer ODE."""
+
+    delta: Array
+    """Rotor angle relative to its first sample [rad]."""
+    t_e: Array
+    """Air-gap torque [pu]."""
+    dw: Array
+    """Measured rotor-speed deviation x2_meas / w_s [pu] driving the governor."""
+    t_m: Array
+    """External mechanical torque [pu] (used only when ``external_tm``)."""
+
+
+class DremState(NamedTuple):
+    f_delta: Array
+    """[F[delta], F[s delta], F[s^2 delta]]."""
+    f_u: Array
+    """[F[u], F[s u], F[s^2 u]] with u = Tm - Te."""
+    h_z: Array
+    """States of c1 c2 s/((s+c1)(s+c2)) driven by z."""
+    h_psi1: Array
+    h_psi2: Array
+    mean_dsq: Array
+    """Moving mean of Delta^2."""
+    theta: Array
+    """[a1_hat, a2_hat]."""
+    x_i: Array
+    """I&I observer state xI."""
+    gov: Array
+    """Governor-turbine states."""
+    log_contraction: Array
+    """int gamma_j K_j Delta^2 dt, j = 1, 2."""
+
+
+class Regression(NamedTuple):
+    delta_det: Array
+    zc: Array
+    k_gamma: Array
+
+
+def _filter3_rhs(x, inp, cfg):
+    l1, l2, l3 = cfg.lambda1, cfg.lambda2, cfg.lambda3
+    p0, p1, p2 = l1 * l2 * l3, l1 * l2 + l1 * l3 + l2 * l3, l1 + l2 + l3
+    return jnp.stack([x[1], x[2], p0 * (inp - x[0]) - p1 * x[1] - p2 * x[2]])
+
+
+def _hd_rhs(w, inp, cfg):
+    return jnp.stack([w[1], inp - (cfg.c1 + cfg.c2) * w[1] - cfg.c1 * cfg.c2 * w[0]])
+
+
+def regression(s: DremState, cfg: ObserverConfig) -> Regression:
+    """Delta = det Psi, Zc = adj(Psi) Z and the adaptive gain K_j from the filter states."""
+    cc = cfg.c1 * cfg.c2
+    z, psi1, psi2 = s.f_delta[..., 2], -s.f_delta[..., 1], s.f_u[..., 0]
+    k = cfg.k_ext
+    p11, p12, p21, p22 = k * psi1, k * psi2, k * cc * s.h_psi1[..., 1], k * cc * s.h_psi2[..., 1]
+    z1, z2 = k * z, k * cc * s.h_z[..., 1]
+    det = p11 * p22 - p12 * p21
+    zc = jnp.stack([p22 * z1 - p12 * z2, -p21 * z1 + p11 * z2], axis=-1)
+    k_gamma = jnp.clip(cfg.delta_ref_sq / s.mean_dsq, cfg.eps, cfg.k_max)
+    return Regression(det, zc, k_gamma)
+
+
+def _vector_field(external_tm: bool):
+    def rhs(t, s: DremState, u: DremInputs, args):
+        cfg, gov, t_ref = args
+        t_m = u.t_m if external_tm else gov.torque(s.gov, u.dw)
+        torque = t_m - u.t_e
+        reg = regression(s, cfg)
+        gamma = jnp.stack([cfg.gamma1, cfg.gamma2])
+        rate = gamma * reg.k_gamma * reg.delta_det**2
+        return DremState(
+            f_delta=_filter3_rhs(s.f_delta, u.delta, cfg),
+            f_u=_filter3_rhs(s.f_u, torque, cfg),
+            h_z=_hd_rhs(s.h_z, s.f_delta[2], cfg),
+            h_psi1=_hd_rhs(s.h_psi1, -s.f_delta[1], cfg),
+            h_psi2=_hd_rhs(s.h_psi2, s.f_u[0], cfg),
+            mean_dsq=(reg.delta_det**2 - s.mean_dsq) / cfg.window_s,
+            theta=-rate * s.theta + gamma * reg.k_gamma * reg.delta_det * reg.zc,
+            x_i=-(s.theta[0] + cfg.k_obs) * (s.x_i + cfg.k_obs * u.delta) + s.theta[1] * torque,
+            gov=gov.vector_field(s.gov, u.dw, t_ref),
+            log_contraction=rate,
+        )
+
+    return rhs
+
+
+class DremTrajectory(eqx.Module):
+    """Observer output at every sample."""
+
+    theta: Float[Array, "T 2"]
+    """[a1_hat, a2_hat]."""
+    x2_hat_rad_s: Float[Array, " T"]
+    t_m_pu: Float[Array, " T"]
+    delta_sq: Float[Array, " T"]
+    """Delta^2, the excitation of the extended regressor."""
+    k_gamma: Float[Array, " T"]
+    log_contraction: Float[Array, "T 2"]
+    solver_ok: Array
+    num_steps: Array
+
+
+def initial_state(inputs0: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: AbstractGovernor,
+                  external_tm: bool) -> DremState:
+    """Filters at rest at the first sample, theta at its initial guess, x2_hat(0) = x2_0."""
+    gov0 = gov.steady_state(t_ref, inputs0.dw)
+    t_m0 = inputs0.t_m if external_tm else gov.torque(gov0, inputs0.dw)
+    u0 = t_m0 - inputs0.t_e
+    zero2 = jnp.zeros(2, dtype=u0.dtype)
+    return DremState(
+        f_delta=jnp.stack([inputs0.delta, 0.0 * u0, 0.0 * u0]),
+        f_u=jnp.stack([u0, 0.0 * u0, 0.0 * u0]),
+        h_z=zero2,
+        h_psi1=zero2,
+        h_psi2=jnp.stack([u0 / (cfg.c1 * cfg.c2), 0.0 * u0]),
+        mean_dsq=cfg.delta_ref_sq,
+        theta=jnp.stack([cfg.a1_init, cfg.a2_init]),
+        x_i=x2_0 - cfg.k_obs * inputs0.delta,
+        gov=gov0,
+        log_contraction=zero2,
+    )
+
+
+def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: AbstractGovernor,
+                 integ: Integrator = Integrator(), external_tm: bool = False) -> DremTrajectory:
+    """Integrate the DREM estimator and the I&I observer over a recording."""
+    first = DremInputs(*(x[0] for x in inputs))
+    y0 = initial_state(first, x2_0, t_ref, cfg, gov, external_tm)
+    out = integrate_sampled(_vector_field(external_tm), y0, ts, inputs, (cfg, gov, t_ref), integ)
+    s: DremState = out.ys
+    reg = regression(s, cfg)
+    t_m = inputs.t_m if external_tm else _torque_series(gov, s.gov, inputs.dw)
+    return DremTrajectory(
+        theta=s.theta,
+        x2_hat_rad_s=s.x_i + cfg.k_obs * inputs.delta,
+        t_m_pu=t_m,
+        delta_sq=reg.delta_det**2,
+        k_gamma=reg.k_gamma,
+        log_contraction=s.log_contraction,
+        solver_ok=out.ok,
+        num_steps=out.num_steps,
+    )
+
+
+def _torque_series(gov, states, dw):
+    return gov.torque(jnp.moveaxis(states, -1, 0), dw)

@@ -1,0 +1,44 @@
+"""Accuracy metrics: sMAPE (paper Eq. 23), RMSE, parameter errors and convergence time."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+
+
+def smape_percent(estimate, measured, mask=None):
+    """sMAPE = 100%/M sum |z_hat - z| / (0.5 (|z_hat| + |z|)) (paper Eq. 23).
+
+    Terms where both values are exactly zero count as zero error. ``mask`` selects samples.
+    Note: for a signal that crosses zero (such as x2) sMAPE is dominated by the crossings.
+    """
+    num = jnp.abs(estimate - measured)
+    den = 0.5 * (jnp.abs(estimate) + jnp.abs(measured))
+    term = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)
+    if mask is None:
+        return 100.0 * jnp.mean(term)
+    return 100.0 * jnp.sum(jnp.where(mask, term, 0.0)) / jnp.maximum(jnp.sum(mask), 1)
+
+
+def rmse(estimate, measured, mask=None):
+    """Root-mean-square error, over ``mask`` if given."""
+    sq = (estimate - measured) ** 2
+    if mask is None:
+        return jnp.sqrt(jnp.mean(sq))
+    return jnp.sqrt(jnp.sum(jnp.where(mask, sq, 0.0)) / jnp.maximum(jnp.sum(mask), 1))
+
+
+def relative_error(estimate, reference):
+    """(estimate - reference) / |reference|."""
+    return (estimate - reference) / jnp.abs(reference)
+
+
+def convergence_index(trajectory, target, band):
+    """First sample after which ``|trajectory - target| <= band |target|`` holds to the end.
+
+    Returns len(trajectory) when the last sample is outside the band.
+    """
+    outside = jnp.abs(trajectory - target) > band * jnp.abs(target)
+    n = trajectory.shape[0]
+    idx = jnp.arange(n)
+    last_outside = jnp.max(jnp.where(outside, idx, -1))
+    return last_outside + 1
