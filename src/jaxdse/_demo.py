@@ -36,7 +36,7 @@ def run_demo(out_dir: Path, duration_s: float = 600.0, seed: int = 0, log=sys.st
         print(f"[jaxdse] simulating '{name}' ({sc.duration_s:.0f} s at {sc.frame_rate_hz:.0f} "
               f"frames/s, P = {sc.p_pu:.3f} pu)...", file=log, flush=True)
         sims[name] = simulate(plant, sc)
-    print(f"[jaxdse] estimating both recordings in one vmapped call...", file=log, flush=True)
+    print("[jaxdse] estimating both recordings in one vmapped call...", file=log, flush=True)
     names = list(sims)
     recs = jax.tree_util.tree_map(lambda *x: np.stack(x), *(sims[n].recording for n in names))
     a2_ref = np.array([float(sims[n].truth.a2) for n in names])

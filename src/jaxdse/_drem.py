@@ -15,7 +15,7 @@ The regressor is extended with H = K [1, c1 c2 s / ((s + c1)(s + c2))]^T    (Sec
 and each parameter is updated by the scalar law (Eq. 20-21)
 
     d theta_j/dt = -gamma_j K_j Delta (Delta theta_j - Zc_j),
-    K_j = clip(Delta_ref^2 / mean(Delta^2), eps, k_max),
+    K_j = Delta_ref^2 / mean(Delta^2), saturated smoothly to [eps, k_max],
 
 with mean(Delta^2) an exponential moving mean over ``window_s``. The I&I observer (Lemma 2):
 
@@ -32,6 +32,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -140,8 +141,20 @@ def regression(s: DremState, cfg: ObserverConfig) -> Regression:
     z1, z2 = k * z, k * cc * s.h_z[..., 1]
     det = p11 * p22 - p12 * p21
     zc = jnp.stack([p22 * z1 - p12 * z2, -p21 * z1 + p11 * z2], axis=-1)
-    k_gamma = jnp.clip(cfg.delta_ref_sq / s.mean_dsq, cfg.eps, cfg.k_max)
-    return Regression(det, zc, k_gamma)
+    return Regression(det, zc, adaptive_gain(s.mean_dsq, cfg))
+
+
+def adaptive_gain(mean_dsq, cfg: ObserverConfig, sharpness: float = 8.0):
+    """K_j = Delta_ref^2 / mean(Delta^2) saturated to [eps, k_max] (paper Eq. 21).
+
+    The saturation is a smooth clip in log space (softplus corners, width ~1/sharpness in
+    log K), so the estimator stays differentiable in every tuning parameter; away from the
+    corners it equals the paper's hard clip.
+    """
+    x = jnp.log(cfg.delta_ref_sq) - jnp.log(mean_dsq)
+    lo, hi = jnp.log(cfg.eps), jnp.log(cfg.k_max)
+    soft = jax.nn.softplus
+    return jnp.exp(lo + (soft(sharpness * (x - lo)) - soft(sharpness * (x - hi))) / sharpness)
 
 
 def _vector_field(external_tm: bool):

@@ -33,6 +33,16 @@ class Integrator(eqx.Module):
     atol: float = eqx.field(static=True, default=1e-8)
     max_substeps: int = eqx.field(static=True, default=256)
     """Most solver steps inside one sample interval (per_interval) before giving up."""
+    adaptive: bool = eqx.field(static=True, default=True)
+    """Adaptive steps (robust to stiff events). False: ``substeps`` fixed steps per interval,
+    which makes the discrete map smooth in the parameters (finite-difference checks)."""
+    substeps: int = eqx.field(static=True, default=1)
+    """Fixed steps per sample interval when ``adaptive`` is False."""
+
+    def controller(self, h):
+        if self.adaptive:
+            return diffrax.PIDController(rtol=self.rtol, atol=self.atol, dtmax=h)
+        return diffrax.ConstantStepSize()
 
 
 class Integrated(eqx.Module):
@@ -72,9 +82,10 @@ def solve_interval(vector_field, y0, t0, t1, u0, u1, args, integ: Integrator):
         return vector_field(t, y, _lerp(u0, u1, (t - t0) / (t1 - t0)), args)
 
     h = t1 - t0
+    dt0 = h if integ.adaptive else h / integ.substeps
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(f), integ.solver, t0, t1, h, y0,
-        stepsize_controller=diffrax.PIDController(rtol=integ.rtol, atol=integ.atol, dtmax=h),
+        diffrax.ODETerm(f), integ.solver, t0, t1, dt0, y0,
+        stepsize_controller=integ.controller(h),
         saveat=diffrax.SaveAt(t1=True), max_steps=integ.max_substeps, throw=False,
     )
     y1 = jtu.tree_map(lambda x: x[0], sol.ys)
@@ -100,11 +111,12 @@ def _single_solve(vector_field, y0, ts, inputs, args, integ):
         return vector_field(t, y, interp.evaluate(t), a)
 
     h = ts[1] - ts[0]
-    controller = diffrax.ClipStepSizeController(
-        diffrax.PIDController(rtol=integ.rtol, atol=integ.atol, dtmax=h), step_ts=ts
-    )
+    if integ.adaptive:
+        controller = diffrax.ClipStepSizeController(integ.controller(h), step_ts=ts)
+    else:
+        controller = diffrax.StepTo(ts=jnp.linspace(ts[0], ts[-1], (ts.shape[0] - 1) * integ.substeps + 1))
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(f), integ.solver, ts[0], ts[-1], h, y0, args=args,
+        diffrax.ODETerm(f), integ.solver, ts[0], ts[-1], None if not integ.adaptive else h, y0, args=args,
         stepsize_controller=controller, saveat=diffrax.SaveAt(ts=ts),
         max_steps=4 * ts.shape[0] + 16 * integ.max_substeps, throw=False,
     )

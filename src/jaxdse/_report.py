@@ -47,7 +47,9 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "flags": {"excited": bool(est.excited), "online": bool(est.online),
                   "solver_ok": bool(est.solver_ok),
                   "log_contraction_a2": _num(est.log_contraction[-1, 1])},
-        "smape_percent": {k: _num(v) for k, v in est.smape._asdict().items()},
+        "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
+                          "x2_playback": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
+                          "P_t": _num(est.smape.p_t), "Q_t": _num(est.smape.q_t)},
         "x2_observer_nrmse_percent": _num(100 * np.sqrt(np.mean(err**2)) / x2_std)
         if x2_std > 0 and err.size else None,
         "t_ref_pu": _num(est.t_ref_pu),
@@ -90,8 +92,8 @@ def format_table(entries: list[dict]) -> str:
             f"{e['name']:<10} {f(e['a2_reference'], '8.2f'):>8} {f(e['a2'], '8.2f'):>8} "
             f"{f(e['a2_error_percent'], '7.2f'):>7} {f(e['H_s'], '6.2f'):>6} "
             f"{f(e['convergence_time_s'], '7.1f'):>7} {f(s['x2_observer'], '7.2f'):>7} "
-            f"{f(s['x2_playback'], '7.2f'):>7} {f(s['i_t'], '6.2f'):>6} {f(s['p_t'], '6.2f'):>6} "
-            f"{f(s['q_t'], '6.2f'):>6}")
+            f"{f(s['x2_playback'], '7.2f'):>7} {f(s['I_t'], '6.2f'):>6} {f(s['P_t'], '6.2f'):>6} "
+            f"{f(s['Q_t'], '6.2f'):>6}")
     lines.append("a2 in rad/s^2 per pu; x2 obs/sim, I_t, P_t, Q_t: sMAPE in % (paper Eq. 23).")
     return "\n".join(lines)
 

@@ -21,7 +21,7 @@ from jaxtyping import Array, Float
 
 from ._estimate import Plant
 from ._integrate import Integrator, solve_interval
-from ._machine import electrical_torque, stator_currents
+from ._machine import electrical_torque
 from ._mapping import aux_current, line_to_grid, lv_current_from_machine, transformer_to_hv
 from ._recording import Recording
 from ._sequence import phases_from_sequences

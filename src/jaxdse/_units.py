@@ -46,8 +46,3 @@ def check_nonnegative(module, *names: str) -> None:
             continue
         if np.any(~(np.asarray(value) >= 0)):
             raise ValueError(f"{type(module).__name__}.{name} must be >= 0, got {value}")
-
-
-def polar(mag, ang):
-    """Complex phasor from magnitude and angle (rad)."""
-    return mag * jnp.exp(1j * ang)
