@@ -145,22 +145,17 @@ def _solve_network(delta, e_q1, u: _GridInputs, p_as_mean, plant: Plant, iterati
     r, x = jnp.real(z_th), jnp.imag(z_th)
     a = jnp.array([[-m.rs_pu - r / sc, m.xq_pu + x / sc], [-m.xd1_pu - x / sc, -m.rs_pu - r / sc]])
 
-    def body(_, i_as):
-        ias_dq = i_as * rot
-        rhs_c = e_dq - z_th * ias_dq
-        rhs = jnp.stack([jnp.real(rhs_c), jnp.imag(rhs_c) - e_q1])
-        i_d, i_q = jnp.linalg.solve(a, rhs)
+    def currents(i_as):
+        rhs_c = e_dq - z_th * i_as * rot
+        i_d, i_q = jnp.linalg.solve(a, jnp.stack([jnp.real(rhs_c), jnp.imag(rhs_c) - e_q1]))
         i_sg = (i_d + 1j * i_q) / rot / sc
-        v_t = e_th + z_th * (i_sg - i_as)
-        return aux_current(v_t, p_as_mean, plant.aux)
+        return e_th + z_th * (i_sg - i_as), i_sg, i_d, i_q
 
-    v0 = e_th
-    i_as = jax.lax.fori_loop(0, iterations, body, aux_current(v0, p_as_mean, plant.aux))
-    ias_dq = i_as * rot
-    rhs_c = e_dq - z_th * ias_dq
-    i_d, i_q = jnp.linalg.solve(a, jnp.stack([jnp.real(rhs_c), jnp.imag(rhs_c) - e_q1]))
-    i_sg = (i_d + 1j * i_q) / rot / sc
-    return e_th + z_th * (i_sg - i_as), i_sg, i_d, i_q
+    # Fixed point on the (small) auxiliary current: contraction ~ |Z_th| |S_AS| / |V|^2.
+    i_as = jax.lax.fori_loop(
+        0, iterations, lambda _, i: aux_current(currents(i)[0], p_as_mean, plant.aux),
+        aux_current(e_th, p_as_mean, plant.aux))
+    return currents(i_as)
 
 
 def _rhs(t, y, u: _GridInputs, args):
