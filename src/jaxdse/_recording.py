@@ -53,10 +53,6 @@ class Recording(eqx.Module):
     def i(self):
         return self.i_mag_pu * jnp.exp(1j * self.i_ang_rad)
 
-    @property
-    def n_samples(self) -> int:
-        return int(np.shape(self.t_s)[-1])
-
 
 def recording_from_three_phase(t_s, v_abc, i_abc, f_hz=None, location: Location = "substation"):
     """Recording from complex three-phase phasors ``[T, 3]``: keeps the positive sequence."""
