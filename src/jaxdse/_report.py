@@ -32,6 +32,8 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
     after = np.asarray(est.time_s) >= (float(est.convergence_time_s)
                                        if bool(est.converged) else 0.0)
     err = np.asarray(est.x2_hat_rad_s - est.x2_meas_rad_s)[after]
+    finite = bool(all(np.all(np.isfinite(np.asarray(getattr(est, f))))
+                      for f in (*CSV_COLUMNS.values(), "a1", "a2")))
     entry = {
         "name": name,
         "a1": _num(est.a1),
@@ -43,9 +45,9 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "a2_error_percent": (_num(100 * (est.a2 - a2_reference) / abs(a2_reference))
                              if a2_reference is not None else None),
         "convergence_time_s": _num(est.convergence_time_s),
-        "converged": bool(est.converged),
+        "converged": bool(est.converged) and finite,
         "flags": {"excited": bool(est.excited), "online": bool(est.online),
-                  "solver_ok": bool(est.solver_ok),
+                  "solver_ok": bool(est.solver_ok), "finite": finite,
                   "log_contraction_a2": _num(est.log_contraction[-1, 1])},
         "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
                           "x2_playback": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
@@ -57,7 +59,7 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "duration_s": _num(est.time_s[-1] - est.time_s[0]),
     }
     if not entry["converged"]:
-        reasons = [k for k in ("excited", "online", "solver_ok") if not entry["flags"][k]]
+        reasons = [k for k in ("excited", "online", "solver_ok", "finite") if not entry["flags"][k]]
         entry["not_converged_reason"] = ", ".join(f"not {r}" for r in reasons) or \
             "a2_hat did not settle within the band"
     return entry
@@ -79,7 +81,8 @@ def write_estimates_csv(path: Path, est: Estimate) -> None:
 
 def format_table(entries: list[dict]) -> str:
     """A text table in the style of the paper's Tables II and III."""
-    head = (f"{'recording':<10} {'a2 ref':>8} {'a2 est':>8} {'err %':>7} {'H s':>6} "
+    w = max([10] + [len(e["name"]) for e in entries])
+    head = (f"{'recording':<{w}} {'a2 ref':>8} {'a2 est':>8} {'err %':>7} {'H s':>6} "
             f"{'conv s':>7} {'x2 obs':>7} {'x2 sim':>7} {'I_t':>6} {'P_t':>6} {'Q_t':>6}")
     lines = [head, "-" * len(head)]
 
@@ -89,7 +92,7 @@ def format_table(entries: list[dict]) -> str:
     for e in entries:
         s = e["smape_percent"]
         lines.append(
-            f"{e['name']:<10} {f(e['a2_reference'], '8.2f'):>8} {f(e['a2'], '8.2f'):>8} "
+            f"{e['name']:<{w}} {f(e['a2_reference'], '8.2f'):>8} {f(e['a2'], '8.2f'):>8} "
             f"{f(e['a2_error_percent'], '7.2f'):>7} {f(e['H_s'], '6.2f'):>6} "
             f"{f(e['convergence_time_s'], '7.1f'):>7} {f(s['x2_observer'], '7.2f'):>7} "
             f"{f(s['x2_playback'], '7.2f'):>7} {f(s['I_t'], '6.2f'):>6} {f(s['P_t'], '6.2f'):>6} "
