@@ -112,9 +112,16 @@ def parse_config(data: dict, path: Path) -> RunConfig:
         if k in out and not isinstance(out[k], typ):
             raise InputError(path, f"must be a {typ.__name__}", key=f"output.{k}")
 
+    # The shared sections alone first, so that their errors name their own keys.
+    for sec, cls in (("line", Line), ("transformer", Transformer), ("aux", AuxiliarySystem),
+                     ("machine", Machine)):
+        _module(path, cls, base[sec], sec)
+    _governor(path, base["governor"], "")
+    _measurement(path, base["measurement"], 50.0, "", partial=True)
+
     runs, names = [], set()
     for n, g in enumerate(gens):
-        prefix = f"generator[{n}]."
+        prefix = f"generator[{n}]." if "generator" in data else ""
         if not isinstance(g, dict):
             raise InputError(path, "must be a table", key=f"generator[{n}]")
         _no_unknown(path, g, set(PLANT_SECTIONS) | {"name", "role", "a2_reference", "h_reference_s"},
@@ -227,11 +234,15 @@ def _settings(path, table: dict) -> Settings:
     return dataclasses.replace(Settings(), **kwargs)
 
 
-def _measurement(path, table: dict, f_nominal_hz: float, prefix: str) -> MeasurementSpec:
+def _measurement(path, table: dict, f_nominal_hz: float, prefix: str,
+                 partial: bool = False) -> MeasurementSpec | None:
+    """Validate a [measurement] table; ``partial`` checks keys and values but not completeness."""
     key = prefix + "measurement."
     fields = {f.name: f for f in dataclasses.fields(MeasurementSpec)}
     allowed = set(fields) - {"f_nominal_hz"}
     _no_unknown(path, table, allowed, key)
+    if partial:
+        table = {"file": "-", "columns": {}, **table}
     if "file" not in table:
         raise InputError(path, "the recording file is required", key=key + "file")
     if "columns" not in table or not isinstance(table["columns"], dict):
@@ -273,4 +284,4 @@ def _measurement(path, table: dict, f_nominal_hz: float, prefix: str) -> Measure
                 raise InputError(path, f"must be >= 0, got {v!r}", key=key + k)
         else:  # v_base_kv, s_base_mva, frame_rate_hz
             kwargs[k] = _positive_number(path, v, key + k)
-    return MeasurementSpec(**kwargs)
+    return None if partial else MeasurementSpec(**kwargs)

@@ -45,9 +45,10 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "a2_error_percent": (_num(100 * (est.a2 - a2_reference) / abs(a2_reference))
                              if a2_reference is not None else None),
         "convergence_time_s": _num(est.convergence_time_s),
-        "converged": bool(est.converged) and finite,
+        "converged": bool(est.converged) and finite and float(est.a2) > 0,
         "flags": {"excited": bool(est.excited), "online": bool(est.online),
                   "solver_ok": bool(est.solver_ok), "finite": finite,
+                  "a2_positive": bool(float(est.a2) > 0),
                   "log_contraction_a2": _num(est.log_contraction[-1, 1])},
         "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
                           "x2_playback": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
@@ -59,7 +60,8 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "duration_s": _num(est.time_s[-1] - est.time_s[0]),
     }
     if not entry["converged"]:
-        reasons = [k for k in ("excited", "online", "solver_ok", "finite") if not entry["flags"][k]]
+        reasons = [k for k in ("excited", "online", "solver_ok", "finite", "a2_positive")
+                   if not entry["flags"][k]]
         entry["not_converged_reason"] = ", ".join(f"not {r}" for r in reasons) or \
             "a2_hat did not settle within the band"
     return entry

@@ -13,6 +13,8 @@ from ._estimate import estimate
 from ._measurement import read_measurement
 from ._report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
 
+_estimate = eqx.filter_jit(estimate)  # one compile per recording length, kept across runs
+
 
 class Progress:
     """A one-line progress bar on stderr (plain lines when stderr is not a terminal)."""
@@ -49,12 +51,11 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
         progress.step(f"read {g.name} ({quality['rows_read']} rows, {len(segments)} segment(s))")
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    run = eqx.filter_jit(estimate)
     entries = []
     for g, segments, quality in loaded:
         for k, (t0, rec) in enumerate(segments):
             name = g.name if len(segments) == 1 else f"{g.name}_part{k + 1}"
-            est = run(rec, g.plant, cfg.observer, cfg.settings, None, g.a2_reference)
+            est = _estimate(rec, g.plant, cfg.observer, cfg.settings, None, g.a2_reference)
             est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + t0)
             entry = summary_entry(name, est, a2_reference=g.a2_reference,
                                   h_reference_s=g.h_reference_s)
