@@ -157,3 +157,11 @@ def test_csv_nan_words_and_bad_numbers(tmp_path):
     (tmp_path / "b.csv").write_text("t,x\n0,1\n1,NaN\n2,\n")
     tab = jd.load_table(tmp_path / "b.csv")
     assert np.isnan(tab.columns["x"][1:]).all()
+
+
+def test_repeated_header_names_are_numbered_and_the_bare_name_refused(tmp_path):
+    (tmp_path / "d.csv").write_text("t,x,x\n0,1,2\n1,3,4\n")
+    tab = jd.load_table(tmp_path / "d.csv")
+    np.testing.assert_array_equal(tab.column("x#2", "v_mag"), [2.0, 4.0])
+    with pytest.raises(jd.InputError, match="column 'x': the header repeats 'x'"):
+        tab.column("x", "v_mag")

@@ -6,6 +6,7 @@ from ._algebraic import algebraic_observer as algebraic_observer
 from ._config import GeneratorRun as GeneratorRun
 from ._config import RunConfig as RunConfig
 from ._config import load_config as load_config
+from ._config import parse_config as parse_config
 from ._drem import ObserverConfig as ObserverConfig
 from ._drem import run_observer as run_observer
 from ._estimate import Estimate as Estimate

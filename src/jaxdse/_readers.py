@@ -45,6 +45,8 @@ class Table:
     """Column name -> unit written in the file, where the format carries one."""
     first_row: int = 1
     """Row number (1-based, as a user counts rows in the file) of the first data row."""
+    ambiguous: frozenset = frozenset()
+    """Names the header repeats; the repeats are named "name#2", ... and the bare name is refused."""
 
     def column(self, name: str | int, role: str) -> np.ndarray:
         """The column ``name`` (or 0-based position), or an InputError naming ``role``."""
@@ -54,6 +56,9 @@ class Table:
                 raise InputError(self.source, f"there is no column number {name} "
                                  f"(the file has {len(names)})", column=role)
             return self.columns[names[name]]
+        if name in self.ambiguous:
+            raise InputError(self.source, f"the header repeats {name!r}; name one of "
+                             f"{name!r}, '{name}#2', ... by position", column=name)
         if name not in self.columns:
             near = [n for n in names if str(name).lower() in n.lower()][:3]
             hint = f"; did you mean {', '.join(map(repr, near))}?" if near else \
@@ -90,8 +95,9 @@ def load_table(paths, fmt: str | None = None, *, delimiter: str = ",", quotechar
             columns[f"{p.stem}/{name}"] = values
             if name in tab.units:
                 units[f"{p.stem}/{name}"] = tab.units[name]
+    ambiguous = frozenset(f"{p.stem}/{a}" for p, tab in zip(paths, tables) for a in tab.ambiguous)
     return Table(source=" + ".join(map(str, paths)), columns=columns, units=units,
-                 first_row=tables[0].first_row)
+                 first_row=tables[0].first_row, ambiguous=ambiguous)
 
 
 def _mtime(path: Path):
@@ -149,9 +155,7 @@ def _read_csv(path: Path, delimiter: str, quotechar: str, time_column) -> Table:
     body = rows[1:]
     if not body:
         raise InputError(path, "the file has a header but no data rows")
-    if len(set(header)) != len(header):
-        dup = next(h for h in header if header.count(h) > 1)
-        raise InputError(path, "the header names this column twice", column=dup, row=1)
+    header, ambiguous = _dedupe(header)
     for k, r in enumerate(body):
         if len(r) != len(header):
             raise InputError(path, f"has {len(r)} fields but the header has {len(header)}",
@@ -168,7 +172,17 @@ def _read_csv(path: Path, delimiter: str, quotechar: str, time_column) -> Table:
             bad = next(k for k, s in enumerate(raw) if _to_float(s) is None)
             raise InputError(path, f"value {raw[bad]!r} is not a number", column=name, row=bad + 2)
         columns[name] = values
-    return Table(source=str(path), columns=columns, first_row=2)
+    return Table(source=str(path), columns=columns, first_row=2, ambiguous=ambiguous)
+
+
+def _dedupe(header: list[str]) -> tuple[list[str], frozenset]:
+    """Repeated header names become "name#2", "name#3"; the bare name is then ambiguous."""
+    seen: dict[str, int] = {}
+    out = []
+    for h in header:
+        seen[h] = seen.get(h, 0) + 1
+        out.append(h if seen[h] == 1 else f"{h}#{seen[h]}")
+    return out, frozenset(h for h, n in seen.items() if n > 1)
 
 
 _NAN_WORDS = {"", "nan", "NaN", "NAN", "na", "NA", "null", "NULL", "-", "#N/A"}
