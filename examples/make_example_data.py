@@ -7,7 +7,7 @@ fluctuations and one event; truth: H = 6.18 s, a2 = 25.42) in a different layout
 different units, as exported by real tools. Values are written with 9 significant digits.
 """
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import jax
@@ -56,7 +56,7 @@ def main():
                             current_direction="into_plant")
     cols = phasor_columns(low.recording, spec3, low.v_abc, low.i_abc)
     write_csv(HERE / "pmu_three_phase.csv.gz", cols, time_column="Timestamp",
-              start=datetime(2024, 3, 1, 12, 0, tzinfo=timezone.utc), digits=9)
+              start=datetime(2024, 3, 1, 12, 0, tzinfo=UTC), digits=9)
 
     # 3. COMTRADE 2013 BINARY32, positive sequence in kV (phase-to-ground) and A, degrees.
     specc = MeasurementSpec(file=(), columns={"time": "time", "frequency": "F",

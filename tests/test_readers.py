@@ -1,6 +1,6 @@
 """Readers and unit handling: every format and every unit/direction option, by round trip."""
 
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 import numpy as np
 import pytest
@@ -62,7 +62,7 @@ def test_csv_three_phase_iso_timestamps_keep_positive_sequence(short, tmp_path):
                               current_direction="into_plant")
     cols = jd.phasor_columns(short.recording, spec, short.v_abc, short.i_abc)
     jd.write_csv(tmp_path / "x.csv.gz", cols, time_column="ts",
-                 start=datetime(2024, 1, 1, tzinfo=timezone.utc))
+                 start=datetime(2024, 1, 1, tzinfo=UTC))
     segs, q = jd.read_measurement(spec, 1100.0)
     assert q["start_time"].startswith("2024-01-01T00:00:00")
     # Timestamps carry microseconds: the grid is exact to 1e-6 s, phasors to 1e-9 pu.

@@ -169,11 +169,12 @@ def _report(entries, sens, wall_s):
     ]
     for e in entries:
         s = e["smape_percent"]
+        conv = "yes" if e["converged"] else "no: " + e.get("not_converged_reason", "")
         lines.append(
             f"| {e['name']} | {e['role']} | {e['data_quality']['median_p_pu_machine']:.3f} | "
             f"{f(e['a2'])} | {f(e['H_s'])} | {f(e['kinetic_energy_mws'], '.0f')} | {f(e['D'])} | "
-            f"{e['a2_range_last_30s_percent']:.1f} | {'yes' if e['converged'] else 'no: ' + e.get('not_converged_reason', '')} | "
-            f"{f(s['x2_observer'])} | {f(s['x2_playback'])} | {f(s['I_t'])} | {f(s['P_t'])} | {f(s['Q_t'])} |")
+            f"{e['a2_range_last_30s_percent']:.1f} | {conv} | {f(s['x2_observer'])} | "
+            f"{f(s['x2_playback'])} | {f(s['I_t'])} | {f(s['P_t'])} | {f(s['Q_t'])} |")
     lines += [
         "",
         "At the low rating (0.8 S) the 845 MW and 496 MW units would run above TGOV1's "

@@ -21,10 +21,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import tomllib
 from dataclasses import dataclass
 from pathlib import Path
-
-import tomllib
 
 from ._drem import ObserverConfig
 from ._estimate import Plant, Settings
