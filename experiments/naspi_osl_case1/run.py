@@ -201,7 +201,7 @@ def report(rows, wall_s):
             f"| {r['name']} | {r['s_mva']:.0f} | {f(r['p_pu'], '.3f')} | {'/'.join(r['governor'])} | "
             f"{','.join(r['non_synchronous_units']) or '-'} | {r['H_reference_s']:.2f} | {f(r['H_s'])} | "
             f"{f(r['H_error_percent'], '.1f')} | {f(r['flags']['log_contraction_a2'], '.1f')} | "
-            f"{'yes' if r['converged'] else 'no'} | "
+            f"{'yes' if r['converged'] else 'no: ' + r.get('not_converged_reason', '')} | "
             f"{f(s['I_t'])} | {f(s['P_t'])} | {f(s['Q_t'])} |")
     if errs.size:
         lines += ["", f"Over {errs.size} plants: median |H error| {np.median(errs):.1f} %, "

@@ -42,8 +42,7 @@ from ._measurement import (
 )
 from ._readers import FORMATS, InputError
 
-MODULE_SECTIONS = {"line": Line, "transformer": Transformer, "aux": AuxiliarySystem,
-                   "machine": Machine, "observer": ObserverConfig}
+PLANT_MODULES = {"line": Line, "transformer": Transformer, "aux": AuxiliarySystem, "machine": Machine}
 GOVERNORS = {"TGOV1": TGOV1}
 PLANT_SECTIONS = ("measurement", "line", "transformer", "aux", "machine", "governor")
 SETTINGS_KEYS = {"derivative_half_width": int, "qss_window_s": float, "convergence_band": float,
@@ -112,8 +111,7 @@ def parse_config(data: dict, path: Path) -> RunConfig:
             raise InputError(path, f"must be a {typ.__name__}", key=f"output.{k}")
 
     # The shared sections alone first, so that their errors name their own keys.
-    for sec, cls in (("line", Line), ("transformer", Transformer), ("aux", AuxiliarySystem),
-                     ("machine", Machine)):
+    for sec, cls in PLANT_MODULES.items():
         _module(path, cls, base[sec], sec)
     _governor(path, base["governor"], "")
     _measurement(path, base["measurement"], 50.0, "", partial=True)

@@ -109,6 +109,9 @@ class Estimate(eqx.Module):
     excited: Array
     online: Array
     solver_ok: Array
+    torque_balanced: Array
+    """Mean Tm - Te within 5 % of mean Te: the governor model can carry the load (else e.g. a
+    valve limit below the output makes Tm saturate and a1, a2 meaningless)."""
     smape: Scores
 
 
@@ -172,6 +175,8 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
     online = jnp.mean(i_mag) > settings.offline_current_pu
     excited = traj.log_contraction[-1, 1] >= settings.min_log_contraction
     solver_ok = traj.solver_ok & sim.solver_ok
+    torque_balanced = jnp.abs(jnp.mean(traj.t_m_pu - alg.t_e_pu)) <= 0.05 * jnp.maximum(
+        jnp.abs(jnp.mean(alg.t_e_pu)), settings.offline_current_pu)
     n = ts.shape[0]
     if a2_reference is None:
         k_conv = convergence_index(a2_hat, a2, settings.convergence_band)
@@ -179,7 +184,7 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
     else:
         k_conv = convergence_index(a2_hat, a2_reference, settings.convergence_band)
         held = k_conv < n
-    converged = held & excited & online & solver_ok
+    converged = held & excited & online & solver_ok & torque_balanced
     t_conv = ts[jnp.minimum(k_conv, n - 1)] - ts[0]
     after = ts >= ts[0] + jnp.where(converged, t_conv, 0.0)
     t_conv = jnp.where(converged, t_conv, jnp.nan)
@@ -199,5 +204,5 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
         q_t_sim_pu=sim.q_t_pu, delta_sq=traj.delta_sq, log_contraction=traj.log_contraction,
         a1=a1, a2=a2, h_s=inertia_from_a2(a2, m.omega_s), d_pu_s=damping_from_a(a1, a2),
         t_ref_pu=t_ref, convergence_time_s=t_conv, converged=converged, excited=excited,
-        online=online, solver_ok=solver_ok, smape=scores,
+        online=online, solver_ok=solver_ok, torque_balanced=torque_balanced, smape=scores,
     )

@@ -47,7 +47,8 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "convergence_time_s": _num(est.convergence_time_s),
         "converged": bool(est.converged) and finite and float(est.a2) > 0,
         "flags": {"excited": bool(est.excited), "online": bool(est.online),
-                  "solver_ok": bool(est.solver_ok), "finite": finite,
+                  "solver_ok": bool(est.solver_ok), "torque_balanced": bool(est.torque_balanced),
+                  "finite": finite,
                   "a2_positive": bool(float(est.a2) > 0),
                   "log_contraction_a2": _num(est.log_contraction[-1, 1])},
         "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
@@ -60,7 +61,8 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
         "duration_s": _num(est.time_s[-1] - est.time_s[0]),
     }
     if not entry["converged"]:
-        reasons = [k for k in ("excited", "online", "solver_ok", "finite", "a2_positive")
+        reasons = [k for k in ("excited", "online", "solver_ok", "torque_balanced", "finite",
+                               "a2_positive")
                    if not entry["flags"][k]]
         entry["not_converged_reason"] = ", ".join(f"not {r}" for r in reasons) or \
             "a2_hat did not settle within the band"
