@@ -15,6 +15,11 @@ inertia H and damping D (a2 = ws/2H, a1 = ws D/2H) from PMU recordings, followin
 Lorenz-Meyer, Suchantke & Schiffer (arXiv:2203.14623): mapping substation phasors to the
 machine terminal, an algebraic observer, a DREM parameter estimator, an I&I speed observer
 and event playback.
+
+examples:
+  jaxdse demo --out jaxdse_demo                       built-in simulated data, truth known
+  jaxdse run examples/csv_positive_sequence.toml      your own recording (CSV/COMTRADE/MAT)
+  jaxdse run --help                                   what goes in and what comes out
 """
 
 DEMO_HELP = """\
