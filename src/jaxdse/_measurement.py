@@ -26,6 +26,7 @@ import numpy as np
 
 from ._readers import InputError, Table, load_table
 from ._recording import Recording
+from ._sequence import positive_sequence
 
 VOLTAGE_UNITS = {"kv_ll": (1e3, False), "kv_ln": (1e3, True), "v_ll": (1.0, False),
                  "v_ln": (1.0, True), "pu": (None, False)}
@@ -38,7 +39,6 @@ GAP_POLICIES = ("split", "error")
 POSITIVE = ("v_mag", "v_ang", "i_mag", "i_ang")
 THREE_PHASE = tuple(f"{q}_{p}_{c}" for q in "vi" for c in ("mag", "ang") for p in "abc")
 COLUMN_ROLES = ("time", "frequency") + POSITIVE + THREE_PHASE
-_A = np.exp(2j * np.pi / 3)
 
 
 @dataclass(frozen=True)
@@ -278,9 +278,8 @@ def _phasors(raw, order, spec: MeasurementSpec, src, names):
         return raw[mag][order] * np.exp(1j * ang * raw[arg][order])
 
     if spec.three_phase:
-        seq = [(phasor(f"{q}_a_mag", f"{q}_a_ang"), phasor(f"{q}_b_mag", f"{q}_b_ang"),
-                phasor(f"{q}_c_mag", f"{q}_c_ang")) for q in "vi"]
-        v, i = ((a + _A * b + _A**2 * c) / 3 for a, b, c in seq)
+        v, i = (np.asarray(positive_sequence(np.stack(
+            [phasor(f"{q}_{p}_mag", f"{q}_{p}_ang") for p in "abc"], axis=-1))) for q in "vi")
     else:
         v, i = phasor("v_mag", "v_ang"), phasor("i_mag", "i_ang")
 

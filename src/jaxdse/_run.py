@@ -24,8 +24,8 @@ class Progress:
         self.t0 = time.perf_counter()
         self.tty = hasattr(stream, "isatty") and stream.isatty()
 
-    def step(self, label: str, advance: int = 1):
-        self.done = min(self.total, self.done + advance)
+    def step(self, label: str):
+        self.done = min(self.total, self.done + 1)
         frac = self.done / max(self.total, 1)
         bar = "#" * round(frac * self.width) + "-" * (self.width - round(frac * self.width))
         line = f"[{bar}] {self.done}/{self.total} {time.perf_counter() - self.t0:6.1f} s  {label}"
@@ -43,7 +43,7 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
     """
     out_dir = Path(out_dir) if out_dir is not None else cfg.out_dir
     t_start = time.perf_counter()
-    progress = Progress(3 * len(cfg.generators), stream)
+    progress = Progress(2 * len(cfg.generators), stream)
     loaded = []
     for g in cfg.generators:
         segments, quality = read_measurement(g.measurement, float(g.plant.machine.s_rated_mva))
@@ -59,30 +59,24 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
             est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + t0)
             entry = summary_entry(name, est, a2_reference=g.a2_reference,
                                   h_reference_s=g.h_reference_s)
-            entry = {"name": name, "role": g.role, "generator": g.name, **entry}
-            entry["segment_start_s"] = t0
-            entry["data_quality"] = quality
-            entries.append((entry, est, g))
-        progress.step(f"estimated {g.name}")
-        for entry, est, gg in entries:
-            if gg is not g:
-                continue
+            entries.append({"name": name, "role": g.role, "generator": g.name, **entry,
+                            "segment_start_s": t0, "data_quality": quality})
             if cfg.trajectories:
-                write_estimates_csv(out_dir / f"estimates_{entry['name']}.csv", est)
+                write_estimates_csv(out_dir / f"estimates_{name}.csv", est)
             if cfg.figures:
-                plot_estimates(est, entry["name"], out_dir, a2_reference=g.a2_reference)
-        progress.step(f"wrote {g.name}")
+                plot_estimates(est, name, out_dir, a2_reference=g.a2_reference)
+        progress.step(f"estimated and wrote {g.name}")
 
     summary = {
         "source": f"jaxdse run {cfg.path}",
         "observer": {k: float(getattr(cfg.observer, k)) for k in cfg.observer.__dataclass_fields__},
         "wall_time_s": round(time.perf_counter() - t_start, 2),
     }
-    write_summary(out_dir / "summary.json", [e for e, _, _ in entries], summary)
-    print(format_table([e for e, _, _ in entries]))
+    write_summary(out_dir / "summary.json", entries, summary)
+    print(format_table(entries))
     print(f"[jaxdse] wrote {out_dir}/summary.json"
           + (", estimates_*.csv" if cfg.trajectories else "")
           + (" and figures" if cfg.figures else "") + f" in {time.perf_counter() - t_start:.1f} s",
           file=stream)
-    return {"recordings": [e for e, _, _ in entries], **summary}
+    return {"recordings": entries, **summary}
 
