@@ -3,6 +3,10 @@ generators from PMU recordings (Lorenz-Meyer, Suchantke & Schiffer, arXiv:2203.1
 
 from ._algebraic import AlgebraicStates as AlgebraicStates
 from ._algebraic import algebraic_observer as algebraic_observer
+from ._batch import estimate_batch as estimate_batch
+from ._batch import select as select
+from ._batch import stack as stack
+from ._batch import stack_recordings as stack_recordings
 from ._config import GeneratorRun as GeneratorRun
 from ._config import RunConfig as RunConfig
 from ._config import load_config as load_config

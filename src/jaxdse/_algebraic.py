@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._machine import Machine, electrical_torque
+from ._signals import unwrap_continuing
 
 
 class AlgebraicStates(eqx.Module):
@@ -29,15 +30,17 @@ class AlgebraicStates(eqx.Module):
     """Air-gap torque Te [pu]."""
 
 
-def algebraic_observer(v_t, i_t, theta_ref, machine: Machine) -> AlgebraicStates:
+def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None) -> AlgebraicStates:
     """States from terminal phasors expressed in a frame rotated by ``theta_ref``.
 
     ``v_t`` and ``i_t`` [pu, machine base] are the terminal phasors multiplied by
     e^{-j theta_ref}; ``theta_ref`` [rad] is any continuous angle (jaxdse uses the measured
     voltage angle), so large angles never pass through ``arg`` and need no unwrapping.
+    ``rel0``: when a stream continues, the angle delta - theta_ref at the first sample as the
+    previous chunk unwrapped it (keeps the unwrapping continuous).
     """
     psi = (machine.rs_pu + 1j * machine.xq_pu) * i_t + v_t
-    rel = jnp.unwrap(jnp.angle(psi))
+    rel = unwrap_continuing(jnp.angle(psi), rel0)
     dq = i_t * jnp.exp(-1j * (rel - jnp.pi / 2))
     i_d, i_q = jnp.real(dq), jnp.imag(dq)
     e_q1 = jnp.abs(psi) - (machine.xq_pu - machine.xd1_pu) * i_d

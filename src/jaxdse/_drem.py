@@ -37,7 +37,8 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._governor import AbstractGovernor
-from ._integrate import Integrator, integrate_sampled
+from ._integrate import Integrator, Previous, integrate_sampled
+from ._metrics import smape_terms
 from ._units import as_float, check_positive
 
 
@@ -192,8 +193,26 @@ class DremTrajectory(eqx.Module):
     """Delta^2, the excitation of the extended regressor."""
     k_gamma: Float[Array, " T"]
     log_contraction: Float[Array, "T 2"]
+    last: DremState
+    """State at the last valid sample."""
     solver_ok: Array
     num_steps: Array
+
+
+class DremBlocks(NamedTuple):
+    """Per-block summaries of the observer (``keep="final"``): what the final report needs."""
+
+    theta_end: Array
+    """[a1_hat, a2_hat] at the last sample of each block."""
+    a2_min: Array
+    """Smallest a2_hat in the block (+inf for a block of padding)."""
+    a2_max: Array
+    x2_smape_sum: Array
+    """Sum of the sMAPE terms of x2_hat against x2_meas (paper Eq. 23)."""
+    torque_sum: Array
+    """Sum of Tm - Te."""
+    count: Array
+    """Valid samples in the block."""
 
 
 def initial_state(inputs0: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: AbstractGovernor,
@@ -218,11 +237,46 @@ def initial_state(inputs0: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: Ab
 
 
 def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: AbstractGovernor,
-                 integ: Integrator = Integrator(), external_tm: bool = False) -> DremTrajectory:
-    """Integrate the DREM estimator and the I&I observer over a recording."""
-    first = DremInputs(*(x[0] for x in inputs))
-    y0 = initial_state(first, x2_0, t_ref, cfg, gov, external_tm)
-    out = integrate_sampled(_vector_field(external_tm), y0, ts, inputs, (cfg, gov, t_ref), integ)
+                 integ: Integrator = Integrator(), external_tm: bool = False, *, valid=None,
+                 resume: tuple[DremState, Previous] | None = None, x2_meas=None,
+                 block: int = 50) -> DremTrajectory | tuple[DremBlocks, DremState, Array]:
+    """Integrate the DREM estimator and the I&I observer over a recording.
+
+    Arguments:
+        ts, inputs: sample times and the sampled inputs.
+        x2_0, t_ref: initial speed deviation [rad/s] and governor reference [pu].
+        valid: bool per sample (padding is False); the state is held there.
+        resume: (state, previous sample) to continue a stream instead of starting at rest.
+        x2_meas: measured x2 per sample. Given, only per-block summaries are kept and
+            ``(DremBlocks, last state, solver ok)`` is returned -- no trajectory is stored.
+        block: samples per block (checkpointing and summary granularity).
+    """
+    if resume is None:
+        first = DremInputs(*(x[0] for x in inputs))
+        y0, previous = initial_state(first, x2_0, t_ref, cfg, gov, external_tm), None
+    else:
+        y0, previous = resume
+    args = (cfg, gov, t_ref)
+    field = _vector_field(external_tm)
+    if x2_meas is not None:
+        def reduce(s: DremState, u: DremInputs, x2m, val):
+            a2 = s.theta[:, 1]
+            x2_hat = s.x_i + cfg.k_obs * u.delta
+            t_m = u.t_m if external_tm else _torque_series(gov, s.gov, u.dw)
+            return DremBlocks(
+                theta_end=s.theta[-1],
+                a2_min=jnp.min(jnp.where(val, a2, jnp.inf)),
+                a2_max=jnp.max(jnp.where(val, a2, -jnp.inf)),
+                x2_smape_sum=jnp.sum(jnp.where(val, smape_terms(x2_hat, x2m), 0.0)),
+                torque_sum=jnp.sum(jnp.where(val, t_m - u.t_e, 0.0)),
+                count=jnp.sum(val),
+            )
+
+        out = integrate_sampled(field, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+                                reduce=reduce, aux=x2_meas, block=block)
+        return out.ys, out.y_last, out.ok
+    out = integrate_sampled(field, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+                            block=block)
     s: DremState = out.ys
     reg = regression(s, cfg)
     t_m = inputs.t_m if external_tm else _torque_series(gov, s.gov, inputs.dw)
@@ -233,6 +287,7 @@ def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: 
         delta_sq=reg.delta_det**2,
         k_gamma=reg.k_gamma,
         log_contraction=s.log_contraction,
+        last=out.y_last,
         solver_ok=out.ok,
         num_steps=out.num_steps,
     )

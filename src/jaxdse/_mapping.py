@@ -136,6 +136,8 @@ class MappedPhasors(eqx.Module):
     """Current from the LV bus into the transformer."""
     i_sg: Complex[Array, " T"]
     """Machine terminal current I_SG = I_LV + I_AS."""
+    p_lv: Float[Array, " T"]
+    """Active power at the LV bus, the input of the auxiliary load's running mean."""
 
 
 # --- Two-port stages ------------------------------------------------------------------------
@@ -179,34 +181,37 @@ def aux_current(v_lv, mean_p_lv, aux: AuxiliarySystem):
     return jnp.conj(s_as / v_lv)
 
 
-def causal_mean(p):
-    """Mean of the samples before each one (the first sample uses itself), along axis 0."""
-    n = jnp.arange(p.shape[0], dtype=p.real.dtype)
-    csum = jnp.cumsum(p)
-    prev = jnp.concatenate([p[:1], csum[:-1]])
-    return prev / jnp.maximum(n, 1.0)
+def causal_mean(p, sum0=0.0, n0=0):
+    """Mean of the samples before each one (the first sample uses itself), along axis 0.
+
+    ``sum0`` and ``n0`` are the sum and count of earlier samples when a stream continues.
+    """
+    n = n0 + jnp.arange(p.shape[0], dtype=p.real.dtype)
+    prev = sum0 + jnp.concatenate([jnp.zeros_like(p[:1]), jnp.cumsum(p)[:-1]])
+    return jnp.where(n > 0, prev / jnp.maximum(n, 1.0), p)
 
 
 # --- Whole maps -----------------------------------------------------------------------------
 
 def map_to_terminal(v, i, line: Line, transformer: Transformer, aux: AuxiliarySystem,
-                    location: Location = "substation") -> MappedPhasors:
+                    location: Location = "substation", mean_sum0=0.0, mean_n0=0) -> MappedPhasors:
     """Measured phasors (V, I towards the grid) at ``location`` -> machine terminal.
 
     ``location`` (static) skips stages: "substation" maps through line, transformer and
     auxiliary load; "hv" through transformer and auxiliary load; "terminal" maps nothing
-    (the measured current is then the machine current).
+    (the measured current is then the machine current). ``mean_sum0`` and ``mean_n0``
+    continue the running mean of P_LV of a stream (:func:`causal_mean`).
     """
     if location == "terminal":
-        return MappedPhasors(v_t=v, i_lv=i, i_sg=i)
+        return MappedPhasors(v_t=v, i_lv=i, i_sg=i, p_lv=jnp.real(v * jnp.conj(i)))
     if location == "substation":
         v, i = line_to_plant(v, i, line)
     elif location != "hv":
         raise ValueError(f"unknown measurement location {location!r}; use one of {LOCATIONS}")
     v_lv, i_lv = transformer_to_lv(v, i, transformer)
     p_lv = jnp.real(v_lv * jnp.conj(i_lv))
-    i_as = aux_current(v_lv, causal_mean(p_lv), aux)
-    return MappedPhasors(v_t=v_lv, i_lv=i_lv, i_sg=i_lv + i_as)
+    i_as = aux_current(v_lv, causal_mean(p_lv, mean_sum0, mean_n0), aux)
+    return MappedPhasors(v_t=v_lv, i_lv=i_lv, i_sg=i_lv + i_as, p_lv=p_lv)
 
 
 def lv_current_from_machine(v_t, i_sg, sum_p_lv, n, aux: AuxiliarySystem):

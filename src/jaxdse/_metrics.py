@@ -5,15 +5,20 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
+def smape_terms(estimate, measured):
+    """|z_hat - z| / (0.5 (|z_hat| + |z|)) per sample; 0 where both are exactly zero."""
+    num = jnp.abs(estimate - measured)
+    den = 0.5 * (jnp.abs(estimate) + jnp.abs(measured))
+    return jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)
+
+
 def smape_percent(estimate, measured, mask=None):
     """sMAPE = 100%/M sum |z_hat - z| / (0.5 (|z_hat| + |z|)) (paper Eq. 23).
 
     Terms where both values are exactly zero count as zero error. ``mask`` selects samples.
     Note: for a signal that crosses zero (such as x2) sMAPE is dominated by the crossings.
     """
-    num = jnp.abs(estimate - measured)
-    den = 0.5 * (jnp.abs(estimate) + jnp.abs(measured))
-    term = jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)
+    term = smape_terms(estimate, measured)
     if mask is None:
         return 100.0 * jnp.mean(term)
     return 100.0 * jnp.sum(jnp.where(mask, term, 0.0)) / jnp.maximum(jnp.sum(mask), 1)

@@ -14,14 +14,16 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from ._governor import AbstractGovernor
 from ._integrate import Integrator, integrate_sampled
 from ._machine import Machine, electrical_torque, stator_currents, terminal_dq, terminal_power
+from ._metrics import smape_terms
 from ._signals import smooth_derivative
 
 
-def estimate_field_voltage(e_q1, i_d, dt, machine: Machine, half_width: int = 0):
+def estimate_field_voltage(e_q1, i_d, dt, machine: Machine, half_width: int = 0, n=None):
     """Ef = T'd0 dE'q/dt + E'q + (xd - x'd) Id [pu] (paper Sec. V, step 2)."""
-    return (machine.td01_s * smooth_derivative(e_q1, dt, half_width) + e_q1
+    return (machine.td01_s * smooth_derivative(e_q1, dt, half_width, n) + e_q1
             + (machine.xd_pu - machine.xd1_pu) * i_d)
 
 
@@ -33,7 +35,9 @@ class PlaybackInputs(NamedTuple):
     e_f: Array
     """Field voltage [pu]."""
     t_m: Array
-    """Mechanical torque [pu]."""
+    """External mechanical torque [pu] (used when no governor is given)."""
+    dw: Array
+    """Measured speed deviation [pu] driving the governor."""
 
 
 class Playback(eqx.Module):
@@ -55,23 +59,62 @@ def _terminal(delta, e_q1, v_mag, theta, machine):
 
 
 def _rhs(t, y, u: PlaybackInputs, args):
-    a1, a2, machine = args
-    delta, x2, e_q1 = y
+    a1, a2, machine, gov, t_ref = args
+    delta, x2, e_q1 = y[0], y[1], y[2]
+    t_m = u.t_m if gov is None else gov.torque(y[3:], u.dw)
     _, _, i_d, i_q = _terminal(delta, e_q1, u.v_mag, u.theta, machine)
     t_e = electrical_torque(e_q1, i_d, i_q, machine)
-    return jnp.stack([
+    d_gov = [] if gov is None else [gov.vector_field(y[3:], u.dw, t_ref)]
+    return jnp.concatenate([jnp.stack([
         x2,
-        -a1 * x2 + a2 * (u.t_m - t_e),
+        -a1 * x2 + a2 * (t_m - t_e),
         (-e_q1 - (machine.xd_pu - machine.xd1_pu) * i_d + u.e_f) / machine.td01_s,
-    ])
+    ]), *d_gov])
+
+
+class PlaybackBlocks(NamedTuple):
+    """Per-block sums of the sMAPE terms of the playback (``keep="final"``)."""
+
+    x2: Array
+    i_t: Array
+    p_t: Array
+    q_t: Array
 
 
 def playback(ts, inputs: PlaybackInputs, y0, a1, a2, machine: Machine,
-             integ: Integrator = Integrator()) -> Playback:
-    """Simulate (delta, x2, E'q) from ``y0`` with parameters a1, a2 under the measured inputs."""
-    out = integrate_sampled(_rhs, y0, ts, inputs, (a1, a2, machine), integ)
-    delta, x2, e_q1 = out.ys[:, 0], out.ys[:, 1], out.ys[:, 2]
-    v_d, v_q, i_d, i_q = _terminal(delta, e_q1, inputs.v_mag, inputs.theta, machine)
-    p_t, q_t = terminal_power(v_d, v_q, i_d, i_q)
-    return Playback(delta_rad=delta, x2_rad_s=x2, e_q1_pu=e_q1, i_t_pu=jnp.hypot(i_d, i_q),
+             integ: Integrator = Integrator(), gov: AbstractGovernor | None = None, t_ref=None, *,
+             valid=None, resume=None, measured=None,
+             block: int = 50) -> Playback | tuple[PlaybackBlocks, Array, Array]:
+    """Simulate (delta, x2, E'q) from ``y0`` with parameters a1, a2 under the measured inputs.
+
+    With a governor ``gov`` (reference ``t_ref``), Tm is integrated alongside from the
+    measured speed and ``y0`` continues with the governor state; else ``inputs.t_m`` is used.
+
+    ``valid`` and ``resume`` (state, previous sample) as in :func:`jaxdse.run_observer`.
+    Given ``measured`` = (x2, I_t, P_t, Q_t) per sample, only per-block sums of the sMAPE
+    terms are kept and ``(PlaybackBlocks, last state, solver ok)`` is returned.
+    """
+    args = (a1, a2, machine, gov, t_ref)
+    y0, previous = (y0, None) if resume is None else resume
+    if measured is not None:
+        def reduce(y, u, meas, val):
+            sim = _outputs(y, u, machine)
+            sums = [jnp.sum(jnp.where(val, smape_terms(a, b), 0.0)) for a, b in zip(sim, meas)]
+            return PlaybackBlocks(*sums)
+
+        out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+                                reduce=reduce, aux=measured, block=block)
+        return out.ys, out.y_last, out.ok
+    out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+                            block=block)
+    x2, i_t, p_t, q_t = _outputs(out.ys, inputs, machine)
+    return Playback(delta_rad=out.ys[:, 0], x2_rad_s=x2, e_q1_pu=out.ys[:, 2], i_t_pu=i_t,
                     p_t_pu=p_t, q_t_pu=q_t, solver_ok=out.ok)
+
+
+def _outputs(y, u: PlaybackInputs, machine):
+    """x2, |I_t|, P_t, Q_t of simulated states ``y`` [T, 3]."""
+    delta, x2, e_q1 = y[:, 0], y[:, 1], y[:, 2]
+    v_d, v_q, i_d, i_q = _terminal(delta, e_q1, u.v_mag, u.theta, machine)
+    p_t, q_t = terminal_power(v_d, v_q, i_d, i_q)
+    return x2, jnp.hypot(i_d, i_q), p_t, q_t

@@ -31,6 +31,9 @@ class Recording(eqx.Module):
     """Current angle [rad]."""
     f_hz: Float[Array, " T"] | None = eqx.field(default=None)
     """Measured frequency [Hz]; None when the recording has no frequency channel."""
+    n_samples: Array | None = eqx.field(default=None)
+    """Number of valid samples when the arrays are padded at the end (see
+    :func:`jaxdse.stack_recordings`); None: all samples are valid."""
     location: Location = eqx.field(static=True, default="substation")
     """Where the PMU sits: "substation", "hv" (transformer HV side) or "terminal"."""
 

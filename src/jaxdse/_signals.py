@@ -5,31 +5,47 @@ from __future__ import annotations
 import jax.numpy as jnp
 
 
-def smooth_derivative(x, dt, half_width: int = 0):
+def unwrap_continuing(angle, start=None):
+    """``jnp.unwrap``, shifted by a multiple of 2 pi so that the first sample lies within pi
+    of ``start`` (the value a previous chunk of a stream gave the same sample)."""
+    out = jnp.unwrap(angle)
+    if start is None:
+        return out
+    return out + 2.0 * jnp.pi * jnp.round((start - out[0]) / (2.0 * jnp.pi))
+
+
+def smooth_derivative(x, dt, half_width: int = 0, n=None):
     """d/dt of a uniformly sampled signal.
 
     Least-squares slope over 2*half_width + 1 samples (the Savitzky-Golay first-derivative
     filter, polynomial order 1 or 2); ``half_width=0`` is the plain central difference.
-    The first and last ``half_width`` samples use central/one-sided differences.
+    The first and last ``half_width`` samples use central/one-sided differences. ``n`` (may
+    be traced) is the number of valid samples when ``x`` is padded at the end; the samples
+    before it then get exactly the derivative of the unpadded signal.
     """
-    grad = jnp.gradient(x, dt)
+    size = x.shape[0]
+    idx = jnp.arange(size)
+    n = size if n is None else n
+    ahead, behind = x[jnp.minimum(idx + 1, size - 1)], x[jnp.maximum(idx - 1, 0)]
+    grad = jnp.where(idx == 0, (ahead - x) / dt,
+                     jnp.where(idx == n - 1, (x - behind) / dt, (ahead - behind) / (2 * dt)))
     if half_width == 0:
         return grad
     k = jnp.arange(-half_width, half_width + 1, dtype=x.dtype)
     weights = k / (dt * jnp.sum(k**2))
-    interior = jnp.convolve(x, weights[::-1], mode="valid")
-    return jnp.concatenate([grad[:half_width], interior, grad[-half_width:]])
+    interior = jnp.convolve(x, weights[::-1], mode="same")
+    return jnp.where((idx >= half_width) & (idx < n - half_width), interior, grad)
 
 
-def frequency_from_angle(theta, dt, f_nominal_hz, half_width: int = 0):
+def frequency_from_angle(theta, dt, f_nominal_hz, half_width: int = 0, n=None):
     """Bus frequency [Hz] from an unwrapped voltage angle measured against the nominal frame."""
-    return f_nominal_hz + smooth_derivative(theta, dt, half_width) / (2.0 * jnp.pi)
+    return f_nominal_hz + smooth_derivative(theta, dt, half_width, n) / (2.0 * jnp.pi)
 
 
-def measured_speed_deviation(f_hz, delta, theta, dt, f_nominal_hz, half_width: int = 0):
+def measured_speed_deviation(f_hz, delta, theta, dt, f_nominal_hz, half_width: int = 0, n=None):
     """x2 = 2 pi (f - f0) + d(delta - theta)/dt [rad/s] (paper Remark 2, both terms kept).
 
     ``f_hz`` is the frequency of the bus whose angle is ``theta``; ``delta`` is the rotor angle
     in the same frame.
     """
-    return 2.0 * jnp.pi * (f_hz - f_nominal_hz) + smooth_derivative(delta - theta, dt, half_width)
+    return 2.0 * jnp.pi * (f_hz - f_nominal_hz) + smooth_derivative(delta - theta, dt, half_width, n)
