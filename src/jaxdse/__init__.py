@@ -50,5 +50,6 @@ from ._simulate import Scenario as Scenario
 from ._simulate import Simulation as Simulation
 from ._simulate import Truth as Truth
 from ._simulate import simulate as simulate
+from ._stream import estimate_stream as estimate_stream
 
 __version__ = "0.1.0"
