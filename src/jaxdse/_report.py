@@ -50,7 +50,7 @@ def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=Non
                   "solver_ok": bool(est.solver_ok), "torque_balanced": bool(est.torque_balanced),
                   "finite": finite,
                   "a2_positive": bool(float(est.a2) > 0),
-                  "log_contraction_a2": _num(est.log_contraction[-1, 1])},
+                  "log_contraction_a2": _num(est.log_contraction_end[1])},
         "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
                           "x2_playback": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
                           "P_t": _num(est.smape.p_t), "Q_t": _num(est.smape.q_t)},

@@ -1,0 +1,379 @@
+"""Side-by-side benchmarks on the same synthetic recordings (issue 4). Writes results.json and
+results.md next to this file; README quotes the table.
+
+    python benchmarks/run.py [--quick]
+
+* jaxdse: the full pipeline (mapping, algebraic observer, governor, DREM/I&I) over batches of
+  recordings (``estimate_batch``, ``keep="final"``, no playback, ``Integrator.fast()``), batch
+  sharded over the 2 CPU cores as 2 XLA host devices. Compile time apart from run time.
+* NumPy: the observer time loop by hand (``numpy_reference.py``), same equations.
+* dynamax UKF and filterpy UKF on the 3rd-order model, driven by the same terminal voltage,
+  Ef and Tm, measuring P_t and Q_t: state estimation (a1, a2 known), and joint state and
+  parameter estimation (augmented state with a1, a2).
+* Gradient cost: value-and-grad of the tuning loss over the forward loss.
+* Peak memory (separate processes): 1 h at 50 frames/s x 1024 configurations (final values
+  only), and a 24 h recording in chunks.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("XLA_FLAGS", "--xla_force_host_platform_device_count=2")
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import platform  # noqa: E402
+import resource  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxdse as jd  # noqa: E402
+from jaxdse._estimate import front_end, playback_inputs, reference_torque  # noqa: E402
+from jaxdse._machine import electrical_torque, stator_currents, terminal_dq, terminal_power  # noqa: E402
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+from numpy_reference import observer_loop  # noqa: E402
+
+FAST = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
+
+
+def timed(fn, repeat=3):
+    """(first call s, best of ``repeat`` later calls s, result)."""
+    t = time.perf_counter()
+    out = fn()
+    first = time.perf_counter() - t
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - t)
+    return first, best, out
+
+
+def recordings(plant, n_distinct, duration_s):
+    sims = [jd.simulate(plant, jd.Scenario(duration_s=duration_s, p_pu=0.45 + 0.5 * k / n_distinct,
+                                           seed=200 + k)) for k in range(n_distinct)]
+    return sims
+
+
+def tile(sims, batch):
+    recs = jd.stack_recordings([s.recording for s in sims])
+    idx = np.arange(batch) % len(sims)
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[idx], recs), idx
+
+
+# --- UKF baselines: the 3rd-order model (paper Eqs. 1-3) --------------------------------------
+
+def ukf_inputs(sim, plant):
+    """Terminal |V|, angle, Ef, Tm (same front end as jaxdse) and measured P_t, Q_t."""
+    rec = sim.recording
+    fe = front_end(rec, plant)
+    st = jd.Settings()
+    t_ref = reference_torque(rec.t_s, fe, plant.governor, st)
+    est = jax.jit(jd.estimate)(rec, plant, jd.ObserverConfig(), st)
+    pb_in, _, meas = playback_inputs(fe, est.t_m_pu, fe.alg.delta_rad[0], t_ref, plant, st,
+                                     rec.t_s[1] - rec.t_s[0])
+    u = np.stack([pb_in.v_mag, pb_in.theta, pb_in.e_f, pb_in.t_m], axis=1)
+    y = np.stack([meas[2], meas[3]], axis=1)
+    x0 = np.array([0.0, float(fe.x2_meas[0]), float(fe.alg.e_q1_pu[0])])
+    return u, y, x0
+
+
+def model_step(x, u, a1, a2, m, dt, xp=jnp):
+    """One Heun step of (delta, x2, E'q) with inputs held over the sample interval."""
+    def f(x):
+        v_d, v_q = xp.sin(x[0] - u[1]) * u[0], xp.cos(x[0] - u[1]) * u[0]
+        i_d, i_q = stator_currents(x[2], v_d, v_q, m)
+        t_e = electrical_torque(x[2], i_d, i_q, m)
+        return xp.stack([x[1], -a1 * x[1] + a2 * (u[3] - t_e),
+                         (-x[2] - (m.xd_pu - m.xd1_pu) * i_d + u[2]) / m.td01_s])
+    k1 = f(x)
+    k2 = f(x + dt * k1)
+    return x + 0.5 * dt * (k1 + k2)
+
+
+def model_output(x, u, m, xp=jnp):
+    v_d, v_q = terminal_dq(u[0], u[1], x[0])
+    i_d, i_q = stator_currents(x[2], v_d, v_q, m)
+    p, q = terminal_power(v_d, v_q, i_d, i_q)
+    return xp.stack([p, q])
+
+
+def dynamax_ukf(u, y, x0, m, dt, a1, a2, joint):
+    from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter
+
+    nx = 5 if joint else 3
+
+    def dyn(x, uu):
+        pa1, pa2 = (x[3], x[4]) if joint else (a1, a2)
+        nxt = model_step(x[:3], uu, pa1, pa2, m, dt)
+        return jnp.concatenate([nxt, x[3:]]) if joint else nxt
+
+    def emit(x, uu):
+        return model_output(x[:3], uu, m)
+
+    q = jnp.diag(jnp.array([1e-8, 1e-4, 1e-7] + ([1e-6, 1e-4] if joint else [])))
+    p0 = jnp.diag(jnp.array([1e-4, 1e-2, 1e-4] + ([0.25, 400.0] if joint else [])))
+    m0 = jnp.concatenate([x0, jnp.array([0.5, 40.0])]) if joint else x0
+    params = ParamsNLGSSM(initial_mean=m0, initial_covariance=p0, dynamics_function=dyn,
+                          dynamics_covariance=q, emission_function=emit,
+                          emission_covariance=jnp.eye(2) * 1e-6)
+    post = unscented_kalman_filter(params, y, UKFHyperParams(), inputs=u,
+                                   output_fields=["filtered_means"])
+    return post.filtered_means[:, :nx]
+
+
+def filterpy_ukf(u, y, x0, m, dt, a1, a2, joint, n=None):
+    from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter
+
+    mn = jax.tree_util.tree_map(lambda v: float(v), m)  # NumPy floats for the model functions
+    nx = 5 if joint else 3
+    state = {"u": u[0]}
+
+    def fx(x, dt_):
+        pa1, pa2 = (x[3], x[4]) if joint else (a1, a2)
+        nxt = model_step(x[:3], state["u"], pa1, pa2, mn, dt_, xp=np)
+        return np.concatenate([nxt, x[3:]]) if joint else nxt
+
+    def hx(x):
+        return model_output(x[:3], state["u"], mn, xp=np)
+
+    ukf = UnscentedKalmanFilter(dim_x=nx, dim_z=2, dt=dt, fx=fx, hx=hx,
+                                points=MerweScaledSigmaPoints(nx, alpha=1.0, beta=0.0, kappa=0.0))
+    ukf.x = np.concatenate([x0, [0.5, 40.0]]) if joint else x0.copy()
+    ukf.P = np.diag([1e-4, 1e-2, 1e-4] + ([0.25, 400.0] if joint else []))
+    ukf.Q = np.diag([1e-8, 1e-4, 1e-7] + ([1e-6, 1e-4] if joint else []))
+    ukf.R = np.eye(2) * 1e-6
+    n = n or len(y)
+    out = np.empty((n, nx))
+    for k in range(n):
+        if k:
+            state["u"] = u[k - 1]
+            ukf.predict()
+        state["u"] = u[k]
+        ukf.update(y[k])
+        out[k] = ukf.x
+    return out
+
+
+# --- memory cases, each in its own process ----------------------------------------------------
+
+def long_recording(plant, hours):
+    """A 600 s simulation repeated to ``hours``, angles kept continuous across the seams."""
+    sim = jd.simulate(plant, jd.Scenario(duration_s=600.0, seed=7))
+    r = sim.recording
+    n = r.t_s.shape[0] - 1
+    reps = int(np.ceil(hours * 3600 / (n * float(r.t_s[1] - r.t_s[0]))))
+    dt = float(r.t_s[1] - r.t_s[0])
+    cols = {k: np.asarray(getattr(r, k))[:n] for k in ("v_mag_pu", "i_mag_pu", "f_hz")}
+    out = {k: np.tile(v, reps) for k, v in cols.items()}
+    for k in ("v_ang_rad", "i_ang_rad"):
+        x = np.asarray(getattr(r, k))
+        step = x[n] - x[0]
+        out[k] = (x[:n][None, :] + step * np.arange(reps)[:, None]).ravel()
+    out["t_s"] = np.arange(n * reps) * dt
+    return jd.Recording(**out), sim
+
+
+def memory_case(case):
+    plant = jd.Plant()
+    t = time.perf_counter()
+    if case == "1h_x1024":
+        rec, _ = long_recording(plant, 1.0)
+        cfgs = jd.stack([jd.ObserverConfig(gamma1=g, gamma2=g) for g in np.geomspace(400, 4000, 1024)])
+        out = jd.estimate_batch(rec, plant, cfgs, FAST)
+        extra = {"samples": int(rec.t_s.shape[0]), "configs": 1024, "a2_median": float(np.median(out.a2))}
+    else:
+        rec, _ = long_recording(plant, 24.0)
+        st = jd.Settings(observer_integrator=jd.Integrator.fast(), playback_integrator=jd.Integrator.fast(),
+                         keep="final")
+        out = jd.estimate_stream(rec, plant, jd.ObserverConfig(), st, chunk_s=1800.0)
+        extra = {"samples": int(rec.t_s.shape[0]), "a2": float(out.a2), "converged": bool(out.converged)}
+    wall = time.perf_counter() - t
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20  # KiB -> GiB
+    print(json.dumps({"peak_rss_gib": peak, "wall_s": wall, **extra}))
+
+
+def run_memory(case):
+    out = subprocess.run([sys.executable, __file__, "--memory", case], capture_output=True, text=True,
+                         env={**os.environ, "XLA_FLAGS": "--xla_force_host_platform_device_count=2"})
+    if out.returncode:
+        raise RuntimeError(out.stderr[-3000:])
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+# --- main -------------------------------------------------------------------------------------
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--quick", action="store_true", help="small sizes (a smoke test, not the table)")
+    ap.add_argument("--memory", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.memory:
+        return memory_case(args.memory)
+    plant = jd.Plant()
+    m = plant.machine
+    duration = 20.0 if args.quick else 60.0
+    batches = (1, 64) if args.quick else (1, 64, 1024, 4096)
+    sims = recordings(plant, 8, duration)
+    n_t = sims[0].recording.t_s.shape[0]
+    dt = float(sims[0].recording.t_s[1] - sims[0].recording.t_s[0])
+    cfg = jd.ObserverConfig()
+    res = {"machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
+           "devices": len(jax.devices()), "jax": jax.__version__, "samples_per_recording": int(n_t),
+           "frame_rate_hz": 1 / dt, "throughput_gen_samples_per_s": {}, "compile_s": {}}
+    print(f"{len(jax.devices())} devices; {n_t} samples per recording", flush=True)
+
+    # jaxdse throughput
+    for b in batches:
+        recs, idx = tile(sims, b)
+        a2 = np.array([float(sims[k].truth.a2) for k in idx])
+        first, best, out = timed(lambda recs=recs, a2=a2, b=b: jd.estimate_batch(
+            recs, plant, cfg, FAST, None, a2, chunk=1024 if b > 1024 else None))
+        res["throughput_gen_samples_per_s"][str(b)] = b * n_t / best
+        res["compile_s"][str(b)] = first - best
+        print(f"jaxdse batch {b}: {b * n_t / best / 1e6:.2f} M gen-samples/s (compile {first - best:.1f} s)",
+              flush=True)
+    # accuracy of jaxdse on the distinct recordings (fast and adaptive integrators)
+    recs, idx = tile(sims, len(sims))
+    a2_true = np.array([float(s.truth.a2) for s in sims])
+    acc = {}
+    for label, st in (("fast (Heun, 1 step/sample)", FAST),
+                      ("adaptive (Tsit5)", jd.Settings(keep="final", playback=False))):
+        e = jd.estimate_batch(recs, plant, cfg, st, None, a2_true)
+        acc[label] = {"a2_error_percent_median_abs": float(np.median(np.abs(100 * (e.a2 - a2_true) / a2_true)))}
+    traj = jd.estimate_batch(recs, plant, cfg, jd.Settings(observer_integrator=jd.Integrator.fast(),
+                                                           playback=False))
+    x2_true = np.stack([np.asarray(s.truth.x2_rad_s) for s in sims])
+    acc["fast (Heun, 1 step/sample)"]["x2_rmse_rad_s_median"] = float(np.median(
+        np.sqrt(np.mean((traj.x2_hat_rad_s - x2_true)[:, n_t // 2:] ** 2, axis=1))))
+    res["jaxdse_accuracy"] = acc
+
+    # NumPy reference on recording 0
+    rec0 = sims[0].recording
+    fe = front_end(rec0, plant)
+    t_ref = float(reference_torque(rec0.t_s, fe, plant.governor, jd.Settings()))
+    delta = np.asarray(fe.alg.delta_rad - fe.alg.delta_rad[0])
+    cfg_d = {f: float(getattr(cfg, f)) for f in cfg.__dataclass_fields__}
+    gov_d = {f: float(getattr(plant.governor, f)) for f in plant.governor.__dataclass_fields__}
+    t = time.perf_counter()
+    theta = observer_loop(np.asarray(rec0.t_s), delta, np.asarray(fe.alg.t_e_pu), np.asarray(fe.dw),
+                          float(fe.x2_meas[0]), t_ref, cfg_d, gov_d)
+    res["numpy_reference_gen_samples_per_s"] = n_t / (time.perf_counter() - t)
+    res["numpy_reference_a2_minus_jaxdse"] = float(theta[-1, 1] - jd.estimate_batch(
+        [rec0], plant, cfg, FAST).a2[0])
+    print(f"numpy: {res['numpy_reference_gen_samples_per_s']:.0f} gen-samples/s", flush=True)
+
+    # UKFs
+    data = [ukf_inputs(s, plant) for s in sims]
+    u_all = np.stack([d[0] for d in data])
+    y_all = np.stack([d[1] for d in data])
+    x0_all = np.stack([d[2] for d in data])
+    a1_true = np.array([float(s.truth.a1) for s in sims])
+    mesh = jax.sharding.Mesh(np.array(jax.devices()), ("batch",))
+    shard = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+    ukf_res = {}
+    for joint in (False, True):
+        name = "joint" if joint else "state"
+        fn = jax.jit(jax.vmap(lambda u, y, x0, a1, a2, joint=joint: dynamax_ukf(u, y, x0, m, dt, a1, a2, joint)))
+        b = 64 if args.quick else 1024
+        idx = np.arange(b) % len(sims)
+        put = [jax.device_put(x[idx], shard) for x in (u_all, y_all, x0_all, a1_true, a2_true)]
+        first, best, out = timed(lambda put=put, fn=fn: jax.block_until_ready(fn(*put)), repeat=1)
+        out = np.asarray(out)[: len(sims)]
+        entry = {"batch": b, "gen_samples_per_s": b * n_t / best, "compile_s": first - best,
+                 "x2_rmse_rad_s_median": float(np.median(np.sqrt(np.mean(
+                     (out[:, n_t // 2:, 1] - x2_true[:, n_t // 2:]) ** 2, axis=1))))}
+        if joint:
+            entry["a2_error_percent_median_abs"] = float(np.median(np.abs(100 * (out[:, -1, 4] - a2_true) / a2_true)))
+        ukf_res[f"dynamax_{name}"] = entry
+        n_fp = min(n_t, 1000)
+        t = time.perf_counter()
+        fp = filterpy_ukf(u_all[0], y_all[0], x0_all[0], m, dt, a1_true[0], a2_true[0], joint, n=n_fp)
+        fp_rate = n_fp / (time.perf_counter() - t)
+        fp_full = fp if n_fp == n_t else filterpy_ukf(u_all[0], y_all[0], x0_all[0], m, dt, a1_true[0],
+                                                      a2_true[0], joint)
+        fp_entry = {"batch": 1, "gen_samples_per_s": fp_rate, "x2_rmse_rad_s": float(np.sqrt(np.mean(
+            (fp_full[n_t // 2:, 1] - x2_true[0, n_t // 2:]) ** 2)))}
+        if joint:
+            fp_entry["a2_error_percent"] = float(100 * (fp_full[-1, 4] - a2_true[0]) / a2_true[0])
+        ukf_res[f"filterpy_{name}"] = fp_entry
+        print(name, ukf_res[f"dynamax_{name}"], fp_entry, flush=True)
+    res["ukf"] = ukf_res
+    res["dynamax_ukf_gen_samples_per_s"] = ukf_res["dynamax_state"]["gen_samples_per_s"]
+    res["filterpy_ukf_gen_samples_per_s"] = ukf_res["filterpy_state"]["gen_samples_per_s"]
+
+    # gradient cost
+    from jaxdse._tune import TUNE_SETTINGS, tuning_loss
+    grecs = jd.stack_recordings([s.recording for s in sims[:4]])
+    ga2 = jnp.asarray(a2_true[:4])
+    fwd = jax.jit(lambda c: tuning_loss(c, grecs, plant, TUNE_SETTINGS, ga2))
+    vg = jax.jit(jax.value_and_grad(lambda c: tuning_loss(c, grecs, plant, TUNE_SETTINGS, ga2)))
+    _, t_f, _ = timed(lambda: jax.block_until_ready(fwd(cfg)))
+    _, t_g, _ = timed(lambda: jax.block_until_ready(vg(cfg)))
+    res["grad_over_forward"] = t_g / t_f
+    res["grad_forward_s"], res["grad_value_and_grad_s"] = t_f, t_g
+    print(f"grad/forward {t_g / t_f:.2f}", flush=True)
+
+    # memory
+    if not args.quick:
+        for case, key in (("1h_x1024", "peak_rss_gib_1h_x1024"), ("24h", "peak_rss_gib_24h_chunked")):
+            out = run_memory(case)
+            res[key] = out["peak_rss_gib"]
+            res[f"memory_case_{case}"] = out
+            print(case, out, flush=True)
+
+    (HERE / ("results_quick.json" if args.quick else "results.json")).write_text(json.dumps(res, indent=2))
+    write_table(res, HERE / ("results_quick.md" if args.quick else "results.md"))
+
+
+def write_table(res, path):
+    tp = res["throughput_gen_samples_per_s"]
+    ref = tp.get("1024")
+    u = res["ukf"]
+    lines = [f"# Benchmarks ({res['machine']}, {res['devices']} XLA CPU devices, jax {res['jax']})", "",
+             f"`python benchmarks/run.py`: {res['samples_per_recording']} samples per recording at "
+             f"{res['frame_rate_hz']:.0f} frames/s, float64.", "",
+             "| method | batch | gen-samples/s | compile s | jaxdse@1024 / this |", "|---|---|---|---|---|"]
+    for b, v in tp.items():
+        lines.append(f"| jaxdse full pipeline, fast | {b} | {v:,.0f} | {res['compile_s'][b]:.1f} | |")
+
+    def rel(v):
+        return f"{ref / v:,.1f}x" if ref else ""
+
+    lines.append(f"| NumPy loop (observer only) | 1 | {res['numpy_reference_gen_samples_per_s']:,.0f} | | "
+                 f"{rel(res['numpy_reference_gen_samples_per_s'])} |")
+    for k, v in u.items():
+        lines.append(f"| {k.replace('_', ' UKF ')} | {v['batch']} | {v['gen_samples_per_s']:,.0f} | "
+                     f"{v.get('compile_s', 0):.1f} | {rel(v['gen_samples_per_s'])} |")
+    lines += ["", "| accuracy | x2 RMSE rad/s (2nd half) | a2 error % |", "|---|---|---|"]
+    a = res["jaxdse_accuracy"]
+    lines.append(f"| jaxdse fast | {a['fast (Heun, 1 step/sample)']['x2_rmse_rad_s_median']:.4f} | "
+                 f"{a['fast (Heun, 1 step/sample)']['a2_error_percent_median_abs']:.2f} (median abs, 8 rec.) |")
+    lines.append(f"| jaxdse adaptive | | {a['adaptive (Tsit5)']['a2_error_percent_median_abs']:.2f} |")
+    for k, v in u.items():
+        x2 = v.get("x2_rmse_rad_s_median", v.get("x2_rmse_rad_s"))
+        a2 = v.get("a2_error_percent_median_abs", v.get("a2_error_percent"))
+        lines.append(f"| {k.replace('_', ' UKF ')} | {x2:.4f} | {'' if a2 is None else f'{a2:.2f}'} |")
+    lines += ["", f"- value-and-grad / forward: {res['grad_over_forward']:.2f} "
+              f"({res['grad_value_and_grad_s']:.3f} s / {res['grad_forward_s']:.3f} s, 4 recordings)"]
+    for key in ("peak_rss_gib_1h_x1024", "peak_rss_gib_24h_chunked"):
+        if key in res:
+            lines.append(f"- {key}: {res[key]:.2f} GiB")
+    path.write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,167 @@
+"""Gradient-based tuning of the observer (lambda, c, K, gamma, k) through the whole pipeline.
+
+The loss (:func:`tuning_loss`) has three normalised parts, averaged over the recordings:
+
+* x2: the I&I observer's x2_hat against the measured x2 after a burn-in (mean squared error
+  over the mean square of x2_meas);
+* playback: the playback's P_t and x2 against the measurements (each over its variance);
+* parameter: where the truth is known (synthetic data), the time averages of
+  e(t)^2 and of 1 - exp(-(e(t)/band)^2 / 2), e = (a2_hat(t) - a2)/a2: the second is a
+  smooth count of the time spent outside the convergence band, so the loss is small only if
+  a2_hat gets there early and stays.
+
+Positive parameters are tuned in log space through one pair of transforms
+(:func:`to_log`, :func:`from_log`), bounded smoothly to a factor ``max_factor`` of the start
+so that the explicit fixed-step integration stays stable. optimistix's BFGS minimises; the
+gradient runs back through the checkpointed time loop (``_integrate``: each block of
+samples is recomputed in the backward pass, so memory grows with the number of blocks).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._batch import stack_recordings
+from ._drem import ObserverConfig
+from ._estimate import Plant, Settings, estimate
+from ._integrate import Integrator
+from ._recording import Recording
+
+TUNABLE = ("lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1", "gamma2", "k_obs")
+"""Observer parameters that :func:`tune` adjusts by default (paper Table I)."""
+
+TUNE_SETTINGS = Settings(observer_integrator=Integrator.fast(), playback_integrator=Integrator.fast())
+
+
+class LossWeights(eqx.Module):
+    """Weights of the three parts of :func:`tuning_loss` and the burn-in of the x2 part."""
+
+    x2: float = 1.0
+    playback: float = 1.0
+    parameter: float = 1.0
+    burn_in_s: float = 10.0
+    band: float = 0.01
+    """Band of the parameter part (relative): half the 2 % convergence band, for margin."""
+
+
+def to_log(config: ObserverConfig, names: Sequence[str] = TUNABLE) -> jax.Array:
+    """The unconstrained coordinates of ``config`` itself: all zeros (see :func:`from_log`)."""
+    return jnp.zeros(len(names), dtype=jnp.asarray(config.gamma1).dtype)
+
+
+def from_log(u, start: ObserverConfig, names: Sequence[str] = TUNABLE,
+             max_factor: float = 10.0) -> ObserverConfig:
+    """p = p_start * exp(L tanh(u / L)), L = ln(max_factor): log space, smoothly bounded."""
+    span = jnp.log(max_factor)
+    scale = jnp.exp(span * jnp.tanh(u / span))
+    values = [getattr(start, n) * scale[k] for k, n in enumerate(names)]
+    return eqx.tree_at(lambda c: [getattr(c, n) for n in names], start, values)
+
+
+def tuning_loss(config: ObserverConfig, recordings: Recording, plant: Plant,
+                settings: Settings = TUNE_SETTINGS, a2_true=None,
+                weights: LossWeights = LossWeights()) -> jax.Array:
+    """Differentiable loss of ``config`` over a stacked batch of recordings (leading axis).
+
+    ``a2_true`` [B] (or None) enables the parameter part; ``plant`` is shared.
+    """
+    settings = dataclasses.replace(settings, keep="trajectories")
+
+    def one(rec, a2):
+        est = estimate(rec, plant, config, settings)
+        n = rec.t_s.shape[0] if rec.n_samples is None else rec.n_samples
+        valid = jnp.arange(rec.t_s.shape[0]) < n
+        after = valid & (est.time_s >= weights.burn_in_s)
+
+        def nmse(sim, meas, mask):
+            mean = jnp.sum(jnp.where(mask, meas, 0.0)) / jnp.sum(mask)
+            var = jnp.sum(jnp.where(mask, (meas - mean) ** 2, 0.0)) / jnp.sum(mask)
+            return jnp.sum(jnp.where(mask, (sim - meas) ** 2, 0.0)) / jnp.sum(mask) / var
+
+        x2_meas = est.x2_meas_rad_s
+        loss = weights.x2 * nmse(est.x2_hat_rad_s, x2_meas, after)
+        if settings.playback:
+            loss += weights.playback * 0.5 * (nmse(est.p_t_sim_pu, est.p_t_pu, valid)
+                                              + nmse(est.x2_sim_rad_s, x2_meas, valid))
+        if a2 is not None:
+            rel2 = ((est.a2_hat - a2) / a2) ** 2
+            outside = 1.0 - jnp.exp(-0.5 * rel2 / weights.band**2)
+            loss += weights.parameter * jnp.sum(jnp.where(valid, rel2 + outside, 0.0)) / n
+        return loss
+
+    return jnp.mean(jax.vmap(one)(recordings, a2_true))
+
+
+class TuneResult(eqx.Module):
+    """Tuned configuration and the losses before and after, on training and held-out data."""
+
+    config: ObserverConfig
+    loss_start: float
+    loss_tuned: float
+    heldout_loss_start: float | None
+    heldout_loss_tuned: float | None
+    steps: int
+    history: tuple
+    """Training loss after each optimiser step."""
+
+
+def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = ObserverConfig(),
+         a2_true: Sequence[float] | None = None, *, heldout: Sequence[Recording] = (),
+         heldout_a2_true: Sequence[float] | None = None, names: Sequence[str] = TUNABLE,
+         weights: LossWeights = LossWeights(), settings: Settings = TUNE_SETTINGS,
+         max_steps: int = 40, max_factor: float = 10.0, rtol: float = 1e-4, atol: float = 1e-6,
+         progress: Callable[[int, float], None] | None = None) -> TuneResult:
+    """Minimise :func:`tuning_loss` over ``names`` with optimistix BFGS, from ``start``.
+
+    Arguments:
+        recordings: training recordings (any lengths; padded and masked).
+        a2_true: known a2 per training recording (synthetic data), or None.
+        heldout, heldout_a2_true: cross-validation recordings, scored before and after.
+        progress: called with (step, training loss) after each optimiser step.
+    """
+    names = tuple(names)
+    train = stack_recordings(list(recordings))
+    a2 = None if a2_true is None else jnp.asarray(a2_true, dtype=float)
+
+    def objective(u, args):  # (value, aux), as optimistix solvers take it
+        cfg = from_log(u, start, names, max_factor)
+        return tuning_loss(cfg, train, plant, settings, a2, weights), None
+
+    solver = optx.BestSoFarMinimiser(optx.BFGS(rtol=rtol, atol=atol))
+    u = to_log(start, names)
+    f_struct = jax.ShapeDtypeStruct((), u.dtype)
+    state = solver.init(objective, u, None, {}, f_struct, None, frozenset())
+    step = eqx.filter_jit(lambda u, s: solver.step(objective, u, None, {}, s, frozenset()))
+    terminate = eqx.filter_jit(lambda u, s: solver.terminate(objective, u, None, {}, s, frozenset()))
+    history, taken = [], 0
+    for taken in range(1, max_steps + 1):
+        u, state, _ = step(u, state)
+        history.append(float(state.best_loss))
+        if progress is not None:
+            progress(taken, history[-1])
+        if bool(terminate(u, state)[0]):
+            break
+    best = from_log(state.best_y, start, names, max_factor)
+    loss = eqx.filter_jit(tuning_loss)
+    held = stack_recordings(list(heldout)) if heldout else None
+    held_a2 = None if heldout_a2_true is None else jnp.asarray(heldout_a2_true, dtype=float)
+
+    def score(cfg, recs, truth):
+        return None if recs is None else float(loss(cfg, recs, plant, settings, truth, weights))
+
+    return TuneResult(config=best, loss_start=score(start, train, a2), loss_tuned=score(best, train, a2),
+                      heldout_loss_start=score(start, held, held_a2),
+                      heldout_loss_tuned=score(best, held, held_a2), steps=taken,
+                      history=tuple(history))
+
+
+def config_values(config: ObserverConfig, names: Sequence[str] = TUNABLE) -> dict[str, float]:
+    """The named parameters as plain floats (for TOML/JSON output)."""
+    return {n: float(np.asarray(getattr(config, n))) for n in names}
