@@ -87,7 +87,7 @@ def main() -> None:
         lines.append(f"| {31 + k} | {fmt(d['convergence_time_s'][k])} | {fmt(t['convergence_time_s'][k])} "
                      f"| {d['smape_x2_observer'][k]:.2f} | {t['smape_x2_observer'][k]:.2f} "
                      f"| {d['a2_error_percent'][k]:+.2f} | {t['a2_error_percent'][k]:+.2f} |")
-    lines.append(f"| **median** | {d['median_convergence_time_s']:.0f} | {t['median_convergence_time_s']:.0f} "
+    lines.append(f"| **median** | {d['median_convergence_time_s']:.0f} | {t['median_convergence_time_s']:.0f} "  # noqa: E501
                  f"| {d['median_smape_x2_observer']:.2f} | {t['median_smape_x2_observer']:.2f} | | |")
     (HERE / "results.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))

@@ -7,7 +7,13 @@ Sections (every key optional unless marked; see ``examples/*.toml`` for commente
     [aux]           AuxiliarySystem fields [machine]      Machine fields
     [governor]      model = "TGOV1" and its fields
     [observer]      ObserverConfig fields (paper Table I by default)
-    [settings]      convergence and derivative settings
+    [settings]      convergence and derivative settings; integrator = "adaptive" | "fast"
+    [sweep]         for ``jaxdse sweep``: mode = "grid" | "random", draws, seed, chunk and
+                    parameters = {name = [values...]} (grid) or {name = [low, high]} (random,
+                    log-uniform); "gamma" sets gamma1 = gamma2
+    [tune]          for ``jaxdse tune``: parameters (list), max_steps, max_factor and
+                    weights = {x2, playback, parameter, burn_in_s, band}; role "auto"
+                    generators train, role "cross" generators are held out
     [output]        dir, figures, trajectories
     [[generator]]   name*, role, a2_reference, h_reference_s, and per-generator tables
                     measurement, line, transformer, aux, machine, governor that override the
@@ -28,6 +34,7 @@ from pathlib import Path
 from ._drem import ObserverConfig
 from ._estimate import Plant, Settings
 from ._governor import TGOV1
+from ._integrate import Integrator
 from ._machine import Machine
 from ._mapping import LOCATIONS, AuxiliarySystem, Line, Transformer
 from ._measurement import (
@@ -77,6 +84,10 @@ class RunConfig:
     out_dir: Path
     figures: bool = True
     trajectories: bool = True
+    sweep: dict = dataclasses.field(default_factory=dict)
+    """Validated [sweep] table (see ``_sweep.sweep_configs``)."""
+    tune: dict = dataclasses.field(default_factory=dict)
+    """Validated [tune] table."""
 
 
 def load_config(path) -> RunConfig:
@@ -95,7 +106,7 @@ def load_config(path) -> RunConfig:
 
 def parse_config(data: dict, path: Path) -> RunConfig:
     """Validate a parsed TOML document (see the module docstring)."""
-    allowed = set(PLANT_SECTIONS) | {"observer", "settings", "output", "generator"}
+    allowed = set(PLANT_SECTIONS) | {"observer", "settings", "output", "generator", "sweep", "tune"}
     _no_unknown(path, data, allowed, "")
     base = {s: _table(path, data, s, s) for s in PLANT_SECTIONS}
     gens = data.get("generator", [{}])
@@ -152,7 +163,68 @@ def parse_config(data: dict, path: Path) -> RunConfig:
     out_dir = Path(out.get("dir", "jaxdse_out"))
     return RunConfig(path=path, generators=tuple(runs), observer=observer, settings=settings,
                      out_dir=out_dir if out_dir.is_absolute() else path.parent / out_dir,
-                     figures=out.get("figures", True), trajectories=out.get("trajectories", True))
+                     figures=out.get("figures", True), trajectories=out.get("trajectories", True),
+                     sweep=_sweep(path, _table(path, data, "sweep", "sweep"), observer),
+                     tune=_tune(path, _table(path, data, "tune", "tune")))
+
+
+def _param_names(path, names, key):
+    from ._tune import TUNABLE
+
+    allowed = set(ObserverConfig.__dataclass_fields__) | {"gamma"}
+    for n in names:
+        if n not in allowed:
+            raise InputError(path, f"unknown observer parameter {n!r}; tunable: {', '.join(TUNABLE)}",
+                             key=key)
+    return names
+
+
+def _sweep(path, table: dict, observer: ObserverConfig) -> dict:
+    _no_unknown(path, table, {"mode", "draws", "seed", "chunk", "parameters"}, "sweep.")
+    mode = table.get("mode", "grid")
+    if mode not in ("grid", "random"):
+        raise InputError(path, "must be 'grid' or 'random'", key="sweep.mode")
+    params = table.get("parameters", {})
+    if not isinstance(params, dict):
+        raise InputError(path, "must be a table {name = [values]}", key="sweep.parameters")
+    _param_names(path, list(params), "sweep.parameters")
+    for name, values in params.items():
+        key = f"sweep.parameters.{name}"
+        if not isinstance(values, list) or not values:
+            raise InputError(path, "must be a non-empty list of numbers", key=key)
+        values = [_positive_number(path, v, key) for v in values]
+        if mode == "random" and (len(values) != 2 or values[0] > values[1]):
+            raise InputError(path, "random mode takes [low, high]", key=key)
+    out = {"mode": mode, "parameters": params}
+    for k, default in (("draws", 64), ("seed", 0), ("chunk", 256)):
+        v = table.get(k, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < (0 if k == "seed" else 1):
+            raise InputError(path, "must be a positive integer", key=f"sweep.{k}")
+        out[k] = v
+    return out
+
+
+def _tune(path, table: dict) -> dict:
+    from ._tune import TUNABLE, LossWeights
+
+    _no_unknown(path, table, {"parameters", "max_steps", "max_factor", "weights"}, "tune.")
+    names = table.get("parameters", list(TUNABLE))
+    if not isinstance(names, list) or not names:
+        raise InputError(path, "must be a non-empty list of names", key="tune.parameters")
+    _param_names(path, names, "tune.parameters")
+    steps = table.get("max_steps", 30)
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise InputError(path, "must be a positive integer", key="tune.max_steps")
+    factor = _positive_number(path, table.get("max_factor", 10.0), "tune.max_factor")
+    if factor <= 1:
+        raise InputError(path, "must be > 1", key="tune.max_factor")
+    weights = table.get("weights", {})
+    if not isinstance(weights, dict):
+        raise InputError(path, "must be a table", key="tune.weights")
+    _no_unknown(path, weights, set(LossWeights.__dataclass_fields__), "tune.weights.")
+    w = {k: _number(path, v, f"tune.weights.{k}") for k, v in weights.items()}
+    names = [n for n in names if n != "gamma"] + (["gamma1", "gamma2"] if "gamma" in names else [])
+    return {"parameters": names, "max_steps": steps, "max_factor": factor, "weights": LossWeights(**w)}
 
 
 def _table(path, data, section, key) -> dict:
@@ -217,8 +289,15 @@ def _governor(path, table: dict, prefix: str):
 
 
 def _settings(path, table: dict) -> Settings:
-    _no_unknown(path, table, set(SETTINGS_KEYS), "settings.")
+    _no_unknown(path, table, set(SETTINGS_KEYS) | {"integrator"}, "settings.")
     kwargs = {}
+    table = dict(table)
+    integ = table.pop("integrator", "adaptive")
+    if integ not in ("adaptive", "fast"):
+        raise InputError(path, "must be 'adaptive' (Tsit5) or 'fast' (Heun, one step per sample)",
+                         key="settings.integrator")
+    if integ == "fast":
+        kwargs["observer_integrator"] = kwargs["playback_integrator"] = Integrator.fast()
     for k, v in table.items():
         if SETTINGS_KEYS[k] is int:
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
