@@ -12,7 +12,6 @@ from collections.abc import Callable, Sequence
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 from jax.experimental import multihost_utils
@@ -164,7 +163,3 @@ def select(batch, k: int):
     """Member ``k`` of a batched result or argument."""
     return jtu.tree_map(lambda x: x[k], batch)
 
-
-def as_jax(tree):
-    """Host NumPy leaves -> JAX arrays (e.g. to pass a batch member back into jitted code)."""
-    return jtu.tree_map(jnp.asarray, tree)

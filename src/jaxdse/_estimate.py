@@ -245,7 +245,7 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
                                            _playback_governor(plant, settings), t_ref,
                                            valid=fe.valid, measured=meas, block=block)
             ok = ok & pb_ok
-        return final_estimate(ts[0], ts[1] - ts[0], fe.n, blocks, pb_blocks, last, ok,
+        return final_estimate(ts[1] - ts[0], fe.n, blocks, pb_blocks, last, ok,
                               front_sums(fe), t_ref, plant.machine, settings, a2_reference)
     traj = run_observer(*obs, valid=fe.valid, block=block)
     return _trajectory_estimate(ts, fe, traj, t_ref, delta0, plant, settings, t_m_in, a2_reference)
@@ -292,7 +292,7 @@ def _flags(sums: FrontSums, torque_sum, log_contraction, settings: Settings):
     return online, excited, torque_balanced
 
 
-def final_estimate(t0, dt, n, blocks: DremBlocks, pb: PlaybackBlocks | None, last: DremState, ok,
+def final_estimate(dt, n, blocks: DremBlocks, pb: PlaybackBlocks | None, last: DremState, ok,
                    sums: FrontSums, t_ref, machine: Machine, settings: Settings,
                    a2_reference=None) -> Estimate:
     """The ``keep="final"`` :class:`Estimate` from per-block summaries (one-shot or stream).

@@ -28,6 +28,7 @@ from ._estimate import (
     _playback_governor,
     final_estimate,
     front_end,
+    front_sums,
     playback_inputs,
     reference_torque,
 )
@@ -69,8 +70,8 @@ def _observer_chunk(rec, plant, config, settings: Settings, ctx, carry, t_m, lea
     else:
         state, previous, t_ref, delta0 = carry
         resume = (state, previous)
-    t_own, d_own, te_own, dw_own, x2_own, i_own, t_m_own = _crop(
-        (ts, fe.alg.delta_rad - delta0, fe.alg.t_e_pu, fe.dw, fe.x2_meas, jnp.abs(fe.i_t), t_m),
+    t_own, d_own, te_own, dw_own, x2_own, t_m_own = _crop(
+        (ts, fe.alg.delta_rad - delta0, fe.alg.t_e_pu, fe.dw, fe.x2_meas, t_m),
         lead, size)
     inputs = DremInputs(d_own, te_own, dw_own, t_m_own)
     valid = jnp.arange(size) < n_own
@@ -79,8 +80,7 @@ def _observer_chunk(rec, plant, config, settings: Settings, ctx, carry, t_m, lea
                                     resume=resume, x2_meas=x2_own, block=settings.block_samples)
     k = n_own - 1
     previous = Previous(t_own[k], jtu.tree_map(lambda x: x[k], inputs))
-    sums = FrontSums(jnp.sum(jnp.where(valid, i_own, 0.0)), jnp.sum(jnp.where(valid, te_own, 0.0)),
-                     jnp.sum(valid))
+    sums = front_sums(fe, lead, lead + size)  # the slice's padding is masked by fe.valid
     return blocks, (last, previous, t_ref, delta0), ok, sums, _next_context(fe, ctx, next_at)
 
 
@@ -173,5 +173,5 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
                 progress(done, work)
         pb_blocks = jtu.tree_map(lambda *x: jnp.asarray(np.concatenate(x)[:n_blocks]), *pb)
     total_sums = FrontSums(*(sum(getattr(x, f) for x in sums) for f in FrontSums._fields))
-    return final_estimate(ts[0], dt, total, blocks, pb_blocks, last, jnp.asarray(ok), total_sums,
+    return final_estimate(dt, total, blocks, pb_blocks, last, jnp.asarray(ok), total_sums,
                           t_ref, plant.machine, settings, a2_reference)
