@@ -14,6 +14,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from ._machine import Machine, electrical_torque
+from ._mapping import hoist
 from ._signals import unwrap_continuing
 
 
@@ -39,11 +40,14 @@ def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None) -> Alge
     ``rel0``: when a stream continues, the angle delta - theta_ref at the first sample as the
     previous chunk unwrapped it (keeps the unwrapping continuous).
     """
-    psi = (machine.rs_pu + 1j * machine.xq_pu) * i_t + v_t
+    z_q, x_diff = hoist(machine.rs_pu + 1j * machine.xq_pu, machine.xq_pu - machine.xd1_pu)
+    psi = z_q * i_t + v_t
     rel = unwrap_continuing(jnp.angle(psi), rel0)
-    dq = i_t * jnp.exp(-1j * (rel - jnp.pi / 2))
+    # Id + j Iq = j I e^{-j delta} with e^{j delta} = psi / |psi|: no trigonometry needed.
+    psi_mag = jnp.sqrt(jnp.real(psi) ** 2 + jnp.imag(psi) ** 2)
+    dq = 1j * i_t * jnp.conj(psi) * (1.0 / jnp.where(psi_mag > 0, psi_mag, 1.0))
     i_d, i_q = jnp.real(dq), jnp.imag(dq)
-    e_q1 = jnp.abs(psi) - (machine.xq_pu - machine.xd1_pu) * i_d
+    e_q1 = psi_mag - x_diff * i_d
     return AlgebraicStates(
         delta_rad=theta_ref + rel,
         e_q1_pu=e_q1,

@@ -32,8 +32,8 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
+import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
 from ._governor import AbstractGovernor
@@ -92,8 +92,8 @@ class DremInputs(NamedTuple):
     """Air-gap torque [pu]."""
     dw: Array
     """Measured rotor-speed deviation x2_meas / w_s [pu] driving the governor."""
-    t_m: Array
-    """External mechanical torque [pu] (used only when ``external_tm``)."""
+    t_m: Array | None
+    """External mechanical torque [pu] (``external_tm`` only; else None)."""
 
 
 class DremState(NamedTuple):
@@ -145,17 +145,20 @@ def regression(s: DremState, cfg: ObserverConfig) -> Regression:
     return Regression(det, zc, adaptive_gain(s.mean_dsq, cfg))
 
 
-def adaptive_gain(mean_dsq, cfg: ObserverConfig, sharpness: float = 8.0):
+def adaptive_gain(mean_dsq, cfg: ObserverConfig):
     """K_j = Delta_ref^2 / mean(Delta^2) saturated to [eps, k_max] (paper Eq. 21).
 
-    The saturation is a smooth clip in log space (softplus corners, width ~1/sharpness in
-    log K), so the estimator stays differentiable in every tuning parameter; away from the
-    corners it equals the paper's hard clip.
+    The saturation is smooth, K = k_max ((s^8 + e^8) / (1 + s^8))^(1/8) with s = r / k_max,
+    e = eps / k_max and r = Delta_ref^2 / mean(Delta^2): softplus corners of width ~1/8 in
+    log K, so the estimator stays differentiable in every tuning parameter; away from the
+    corners it equals the paper's hard clip. Powers of 2 and square roots only (no exp/log:
+    this runs twice per step of the time loop).
     """
-    x = jnp.log(cfg.delta_ref_sq) - jnp.log(mean_dsq)
-    lo, hi = jnp.log(cfg.eps), jnp.log(cfg.k_max)
-    soft = jax.nn.softplus
-    return jnp.exp(lo + (soft(sharpness * (x - lo)) - soft(sharpness * (x - hi))) / sharpness)
+    # s <= 1e4: K = k_max to round-off there, and no overflow (or inf gradient) at mean = 0.
+    s = cfg.delta_ref_sq / jnp.maximum(cfg.k_max * mean_dsq, 1e-4 * cfg.delta_ref_sq)
+    e = cfg.eps / cfg.k_max
+    s8, e8 = ((s * s) ** 2) ** 2, ((e * e) ** 2) ** 2
+    return cfg.k_max * jnp.sqrt(jnp.sqrt(jnp.sqrt((s8 + e8) / (1.0 + s8))))
 
 
 def _vector_field(external_tm: bool):
@@ -237,7 +240,7 @@ def initial_state(inputs0: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: Ab
 
 
 def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: AbstractGovernor,
-                 integ: Integrator = Integrator(), external_tm: bool = False, *, valid=None,
+                 integ: Integrator = Integrator(), external_tm: bool = False, *, n_valid=None,
                  resume: tuple[DremState, Previous] | None = None, x2_meas=None,
                  block: int = 50) -> DremTrajectory | tuple[DremBlocks, DremState, Array]:
     """Integrate the DREM estimator and the I&I observer over a recording.
@@ -245,14 +248,14 @@ def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: 
     Arguments:
         ts, inputs: sample times and the sampled inputs.
         x2_0, t_ref: initial speed deviation [rad/s] and governor reference [pu].
-        valid: bool per sample (padding is False); the state is held there.
+        n_valid: valid samples (may be traced); the state is held on the padding after them.
         resume: (state, previous sample) to continue a stream instead of starting at rest.
         x2_meas: measured x2 per sample. Given, only per-block summaries are kept and
             ``(DremBlocks, last state, solver ok)`` is returned -- no trajectory is stored.
         block: samples per block (checkpointing and summary granularity).
     """
     if resume is None:
-        first = DremInputs(*(x[0] for x in inputs))
+        first = jtu.tree_map(lambda x: x[0], inputs)
         y0, previous = initial_state(first, x2_0, t_ref, cfg, gov, external_tm), None
     else:
         y0, previous = resume
@@ -272,10 +275,10 @@ def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: 
                 count=jnp.sum(val),
             )
 
-        out = integrate_sampled(field, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+        out = integrate_sampled(field, y0, ts, inputs, args, integ, n_valid=n_valid, previous=previous,
                                 reduce=reduce, aux=x2_meas, block=block)
         return out.ys, out.y_last, out.ok
-    out = integrate_sampled(field, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+    out = integrate_sampled(field, y0, ts, inputs, args, integ, n_valid=n_valid, previous=previous,
                             block=block)
     s: DremState = out.ys
     reg = regression(s, cfg)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from typing import Literal, NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -185,7 +186,10 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     # Work in the frame of the measured voltage angle: no large angle ever enters arg().
     theta_ref = unwrap_continuing(recording.v_ang_rad, ctx.theta_ref0)
     v_meas = recording.v_mag_pu + 0j
-    i_meas = recording.i_mag_pu * jnp.exp(1j * (recording.i_ang_rad - theta_ref))
+    # Materialised once (a barrier): XLA would otherwise recompute its sin and cos in each of
+    # the fused loops of the mapping below.
+    i_meas = jax.lax.optimization_barrier(
+        recording.i_mag_pu * jnp.exp(1j * (recording.i_ang_rad - theta_ref)))
     mapped = map_to_terminal(v_meas, i_meas, plant.line, plant.transformer, plant.aux,
                              recording.location, ctx.p_lv_sum, ctx.p_lv_count)
     i_t = mapped.i_sg * (plant.s_base_mva / m.s_rated_mva)
@@ -229,13 +233,13 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
     fe = front_end(recording, plant, settings)
     t_ref = reference_torque(ts, fe, plant.governor, settings)
     delta0 = fe.alg.delta_rad[0]
-    t_m_in = jnp.zeros_like(ts) if t_m is None else jnp.asarray(t_m, dtype=ts.dtype)
+    t_m_in = _external_torque(t_m, ts, settings)
     inputs = DremInputs(fe.alg.delta_rad - delta0, fe.alg.t_e_pu, fe.dw, t_m_in)
     x2_0, block = fe.x2_meas[0], settings.block_samples
     obs = (ts, inputs, x2_0, t_ref, config, plant.governor, settings.observer_integrator,
            settings.external_tm)
     if settings.keep == "final":
-        blocks, last, ok = run_observer(*obs, valid=fe.valid, x2_meas=fe.x2_meas, block=block)
+        blocks, last, ok = run_observer(*obs, n_valid=fe.n, x2_meas=fe.x2_meas, block=block)
         pb_blocks = None
         if settings.playback:
             pb_in, y0, meas = playback_inputs(fe, t_m_in, delta0, t_ref, plant, settings,
@@ -243,12 +247,21 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
             pb_blocks, _, pb_ok = playback(ts, pb_in, y0, last.theta[0], last.theta[1],
                                            plant.machine, settings.playback_integrator,
                                            _playback_governor(plant, settings), t_ref,
-                                           valid=fe.valid, measured=meas, block=block)
+                                           n_valid=fe.n, measured=meas, block=block)
             ok = ok & pb_ok
         return final_estimate(ts[1] - ts[0], fe.n, blocks, pb_blocks, last, ok,
                               front_sums(fe), t_ref, plant.machine, settings, a2_reference)
-    traj = run_observer(*obs, valid=fe.valid, block=block)
+    traj = run_observer(*obs, n_valid=fe.n, block=block)
     return _trajectory_estimate(ts, fe, traj, t_ref, delta0, plant, settings, t_m_in, a2_reference)
+
+
+def _external_torque(t_m, ts, settings: Settings):
+    """The ``t_m`` argument as an array when ``settings.external_tm``, else None (unused)."""
+    if not settings.external_tm:
+        return None
+    if t_m is None:
+        raise ValueError("Settings(external_tm=True) needs the t_m argument (Tm per sample)")
+    return jnp.asarray(t_m, dtype=ts.dtype)
 
 
 def playback_inputs(fe: FrontEnd, t_m, delta0, t_ref, plant: Plant, settings: Settings, dt):
@@ -349,7 +362,7 @@ def _trajectory_estimate(ts, fe: FrontEnd, traj: DremTrajectory, t_ref, delta0, 
     if settings.playback:
         pb_in, y0, _ = playback_inputs(fe, t_m, delta0, t_ref, plant, settings, ts[1] - ts[0])
         sim = playback(ts, pb_in, y0, a1, a2, m, settings.playback_integrator,
-                       _playback_governor(plant, settings), t_ref, valid=valid,
+                       _playback_governor(plant, settings), t_ref, n_valid=n,
                        block=settings.block_samples)
         e_f, sim_ok = pb_in.e_f, sim.solver_ok
     else:

@@ -142,11 +142,18 @@ class MappedPhasors(eqx.Module):
 
 # --- Two-port stages ------------------------------------------------------------------------
 
+def hoist(*coefficients):
+    """Materialise scalar coefficients once. Without this barrier XLA fuses their (complex
+    exp, division) arithmetic into every per-sample loop and recomputes it per sample."""
+    return jax.lax.optimization_barrier(coefficients)
+
+
 def line_to_plant(v5, i5, line: Line):
     """Substation (bus 5) -> transformer HV bus (bus 4), paper Eq. 8 with I5 = -I_PMU."""
-    i_series = i5 + 0.5 * line.y * v5
-    v4 = v5 + line.z * i_series
-    return v4, i_series + 0.5 * line.y * v4
+    y_half, z = hoist(0.5 * line.y, line.z)
+    i_series = i5 + y_half * v5
+    v4 = v5 + z * i_series
+    return v4, i_series + y_half * v4
 
 
 def line_to_grid(v4, i4, line: Line):
@@ -158,11 +165,12 @@ def line_to_grid(v4, i4, line: Line):
 
 def transformer_to_lv(v_hv, i_hv, tr: Transformer):
     """Transformer HV side -> LV bus (paper Eq. 9, derived for the generator convention)."""
-    n = tr.ratio
-    v_inner, i_inner = v_hv / n, i_hv * jnp.conj(n)
-    v_m = v_inner + (tr.r_hv_pu + 1j * tr.x_hv_pu) * i_inner
-    i_lv = i_inner + tr.y_m * v_m
-    return v_m + (tr.r_lv_pu + 1j * tr.x_lv_pu) * i_lv, i_lv
+    inv_n, conj_n, z_hv, y_m, z_lv = hoist(1.0 / tr.ratio, jnp.conj(tr.ratio), tr.r_hv_pu + 1j * tr.x_hv_pu,
+                                           tr.y_m, tr.r_lv_pu + 1j * tr.x_lv_pu)
+    v_inner, i_inner = v_hv * inv_n, i_hv * conj_n
+    v_m = v_inner + z_hv * i_inner
+    i_lv = i_inner + y_m * v_m
+    return v_m + z_lv * i_lv, i_lv
 
 
 def transformer_to_hv(v_lv, i_lv, tr: Transformer):
@@ -176,9 +184,9 @@ def transformer_to_hv(v_lv, i_lv, tr: Transformer):
 
 def aux_current(v_lv, mean_p_lv, aux: AuxiliarySystem):
     """Current drawn by the auxiliary system, I_AS = conj(S_AS / V_LV) (paper Eqs. 11-12)."""
-    p_as = aux.kappa * mean_p_lv
-    s_as = p_as * (1.0 + 1j * aux.q_over_p)
-    return jnp.conj(s_as / v_lv)
+    kappa, q_over_p = hoist(aux.kappa, aux.q_over_p)
+    s_as = kappa * mean_p_lv * (1.0 + 1j * q_over_p)
+    return jnp.conj(s_as) * v_lv * (1.0 / (jnp.real(v_lv) ** 2 + jnp.imag(v_lv) ** 2))
 
 
 def causal_mean(p, sum0=0.0, n0=0):

@@ -34,8 +34,8 @@ class PlaybackInputs(NamedTuple):
     """Terminal voltage angle, same frame as the rotor angle [rad]."""
     e_f: Array
     """Field voltage [pu]."""
-    t_m: Array
-    """External mechanical torque [pu] (used when no governor is given)."""
+    t_m: Array | None
+    """External mechanical torque [pu] (when no governor is given; else None)."""
     dw: Array
     """Measured speed deviation [pu] driving the governor."""
 
@@ -83,14 +83,14 @@ class PlaybackBlocks(NamedTuple):
 
 def playback(ts, inputs: PlaybackInputs, y0, a1, a2, machine: Machine,
              integ: Integrator = Integrator(), gov: AbstractGovernor | None = None, t_ref=None, *,
-             valid=None, resume=None, measured=None,
+             n_valid=None, resume=None, measured=None,
              block: int = 50) -> Playback | tuple[PlaybackBlocks, Array, Array]:
     """Simulate (delta, x2, E'q) from ``y0`` with parameters a1, a2 under the measured inputs.
 
     With a governor ``gov`` (reference ``t_ref``), Tm is integrated alongside from the
     measured speed and ``y0`` continues with the governor state; else ``inputs.t_m`` is used.
 
-    ``valid`` and ``resume`` (state, previous sample) as in :func:`jaxdse.run_observer`.
+    ``n_valid`` and ``resume`` (state, previous sample) as in :func:`jaxdse.run_observer`.
     Given ``measured`` = (x2, I_t, P_t, Q_t) per sample, only per-block sums of the sMAPE
     terms are kept and ``(PlaybackBlocks, last state, solver ok)`` is returned.
     """
@@ -102,10 +102,10 @@ def playback(ts, inputs: PlaybackInputs, y0, a1, a2, machine: Machine,
             sums = [jnp.sum(jnp.where(val, smape_terms(a, b), 0.0)) for a, b in zip(sim, meas)]
             return PlaybackBlocks(*sums)
 
-        out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+        out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, n_valid=n_valid, previous=previous,
                                 reduce=reduce, aux=measured, block=block)
         return out.ys, out.y_last, out.ok
-    out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, valid=valid, previous=previous,
+    out = integrate_sampled(_rhs, y0, ts, inputs, args, integ, n_valid=n_valid, previous=previous,
                             block=block)
     x2, i_t, p_t, q_t = _outputs(out.ys, inputs, machine)
     return Playback(delta_rad=out.ys[:, 0], x2_rad_s=x2, e_q1_pu=out.ys[:, 2], i_t_pu=i_t,

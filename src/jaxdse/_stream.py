@@ -25,6 +25,7 @@ from ._estimate import (
     Plant,
     Settings,
     StreamContext,
+    _external_torque,
     _playback_governor,
     final_estimate,
     front_end,
@@ -74,9 +75,8 @@ def _observer_chunk(rec, plant, config, settings: Settings, ctx, carry, t_m, lea
         (ts, fe.alg.delta_rad - delta0, fe.alg.t_e_pu, fe.dw, fe.x2_meas, t_m),
         lead, size)
     inputs = DremInputs(d_own, te_own, dw_own, t_m_own)
-    valid = jnp.arange(size) < n_own
     blocks, last, ok = run_observer(t_own, inputs, x2_own[0], t_ref, config, plant.governor,
-                                    settings.observer_integrator, settings.external_tm, valid=valid,
+                                    settings.observer_integrator, settings.external_tm, n_valid=n_own,
                                     resume=resume, x2_meas=x2_own, block=settings.block_samples)
     k = n_own - 1
     previous = Previous(t_own[k], jtu.tree_map(lambda x: x[k], inputs))
@@ -101,7 +101,7 @@ def _playback_chunk(rec, plant, settings: Settings, ctx, carry, t_m, lead: int, 
     t_own, in_own, meas_own = _crop((rec.t_s, inputs, measured), lead, size)
     blocks, last, ok = playback(t_own, in_own, y0, theta[0], theta[1], plant.machine,
                                 settings.playback_integrator, _playback_governor(plant, settings),
-                                t_ref, valid=jnp.arange(size) < n_own, resume=carry,
+                                t_ref, n_valid=n_own, resume=carry,
                                 measured=meas_own, block=settings.block_samples)
     k = n_own - 1
     return blocks, (last, Previous(t_own[k], jtu.tree_map(lambda x: x[k], in_own))), ok
@@ -129,7 +129,7 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
     chunk = max(1, round(chunk_s / dt / size_b)) * size_b
     if chunk * dt < settings.qss_window_s or chunk <= 2 * hw + 1:
         raise ValueError(f"chunk_s = {chunk_s} s is shorter than qss_window_s or the derivative window")
-    t_m_all = np.zeros(total) if t_m is None else np.asarray(t_m, dtype=np.float64)
+    t_m_all = _external_torque(t_m, ts, settings)
     starts = list(range(0, total, chunk))
     work = total * (2 if settings.playback else 1)
 
@@ -139,8 +139,10 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
             a, b = max(s - hw, 0), min(e + hw, total)
             lead = s - a
             size = chunk + lead + hw  # one shape for every chunk but the first
-            t_slice = np.asarray(t_m_all[a:b])
-            t_slice = jnp.asarray(np.concatenate([t_slice, np.repeat(t_slice[-1:], size - (b - a))]))
+            t_slice = None
+            if t_m_all is not None:
+                t_slice = np.asarray(t_m_all[a:b])
+                t_slice = jnp.asarray(np.concatenate([t_slice, np.repeat(t_slice[-1:], size - (b - a))]))
             yield s, e, a, lead, _slice(recording, a, b, size), t_slice
 
     blocks, sums, contexts, carry, ok, done = [], [], [], None, True, 0
