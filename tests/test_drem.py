@@ -88,3 +88,31 @@ def test_regression_identity_holds_on_truth(ambient, plant):
     rhs_ = np.asarray(reg.delta_det)[late, None] * theta
     # Inputs are sampled at 50 Hz and interpolated linearly: agreement to discretisation error.
     assert np.max(np.abs(lhs - rhs_)) < 1e-3 * np.max(np.abs(rhs_))
+
+
+def test_trapezoid_equals_diffrax_heun():
+    """The lean solver takes the same steps as diffrax.Heun: fixed and adaptive."""
+    import diffrax
+
+    term = diffrax.ODETerm(lambda t, y, a: {"x": -y["x"] * jnp.sin(t) + y["v"], "v": -4.0 * y["x"]})
+    y0 = {"x": jnp.array(1.0), "v": jnp.array(0.3)}
+    for ctrl in (diffrax.ConstantStepSize(), diffrax.PIDController(rtol=1e-5, atol=1e-7)):
+        sols = [diffrax.diffeqsolve(term, s, 0.0, 5.0, 0.05, y0, stepsize_controller=ctrl)
+                for s in (jd.Trapezoid(), diffrax.Heun())]
+        assert int(sols[0].stats["num_steps"]) == int(sols[1].stats["num_steps"])
+        for k in y0:
+            np.testing.assert_allclose(sols[0].ys[k], sols[1].ys[k], rtol=1e-12, atol=1e-14)
+
+
+def test_adaptive_gain_is_the_log_space_softplus_clip():
+    """K = exp(log eps + (softplus(8 (x - log eps)) - softplus(8 (x - log k_max))) / 8) with
+    x = log(Delta_ref^2 / mean): the square-root form equals it, and is finite at mean = 0."""
+    cfg = jd.ObserverConfig()
+    mean = jnp.geomspace(1e-300, 1e10, 3000)
+    x = jnp.log(cfg.delta_ref_sq / mean)
+    lo, hi = jnp.log(cfg.eps), jnp.log(cfg.k_max)
+    sp = jax.nn.softplus
+    ref = jnp.exp(lo + (sp(8 * (x - lo)) - sp(8 * (x - hi))) / 8)
+    np.testing.assert_allclose(jd._drem.adaptive_gain(mean, cfg), ref, rtol=1e-12)
+    assert float(jd._drem.adaptive_gain(0.0, cfg)) == float(cfg.k_max)
+    assert np.isfinite(float(jax.grad(jd._drem.adaptive_gain)(0.0, cfg)))

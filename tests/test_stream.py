@@ -14,9 +14,10 @@ def test_stream_equals_one_shot(ambient, plant, case):
     host = {k: np.asarray(getattr(ambient.recording, k))[:3100] for k in FIELDS}
     if case == "fast":
         fast = jd.Integrator.fast()
-        st = jd.Settings(observer_integrator=fast, playback_integrator=fast, keep="final")
+        st = jd.Settings(observer_integrator=fast, playback_integrator=fast, keep="final",
+                         qss_window_s=5.0)
     else:  # derived frequency, angles wrapped to (-pi, pi], adaptive steps
-        st = jd.Settings(keep="final")
+        st = jd.Settings(keep="final", qss_window_s=5.0)
         host["f_hz"] = None
         for k in ("v_ang_rad", "i_ang_rad"):
             host[k] = np.angle(np.exp(1j * (host[k] + 40.0)))

@@ -23,6 +23,7 @@ from ._export import write_csv as write_csv
 from ._governor import TGOV1 as TGOV1
 from ._governor import AbstractGovernor as AbstractGovernor
 from ._integrate import Integrator as Integrator
+from ._integrate import Trapezoid as Trapezoid
 from ._machine import Machine as Machine
 from ._mapping import AuxiliarySystem as AuxiliarySystem
 from ._mapping import Line as Line

@@ -5,10 +5,11 @@ The loss (:func:`tuning_loss`) has three normalised parts, averaged over the rec
 * x2: the I&I observer's x2_hat against the measured x2 after a burn-in (mean squared error
   over the mean square of x2_meas);
 * playback: the playback's P_t and x2 against the measurements (each over its variance);
-* parameter: where the truth is known (synthetic data), the time averages of
-  e(t)^2 and of 1 - exp(-(e(t)/band)^2 / 2), e = (a2_hat(t) - a2)/a2: the second is a
-  smooth count of the time spent outside the convergence band, so the loss is small only if
-  a2_hat gets there early and stays.
+* parameter: where the truth is known (synthetic data), with e = (a2_hat(t) - a2)/a2 and
+  o(t) = 1 - exp(-(e(t)/band)^2 / 2) a smooth indicator of being outside the band: the time
+  averages of e^2 and of o, plus a soft last exit time, the 8-norm over the recording of
+  (t/T) o(t). The loss is small only if a2_hat enters the band early and stays: convergence
+  time is a *last* exit, which a plain average of o barely sees.
 
 Positive parameters are tuned in log space through one pair of transforms
 (:func:`to_log`, :func:`from_log`), bounded smoothly to a factor ``max_factor`` of the start
@@ -93,7 +94,9 @@ def tuning_loss(config: ObserverConfig, recordings: Recording, plant: Plant,
         if a2 is not None:
             rel2 = ((est.a2_hat - a2) / a2) ** 2
             outside = 1.0 - jnp.exp(-0.5 * rel2 / weights.band**2)
-            loss += weights.parameter * jnp.sum(jnp.where(valid, rel2 + outside, 0.0)) / n
+            late = est.time_s / est.time_s[n - 1] * outside
+            last_exit = (jnp.sum(jnp.where(valid, late**8, 0.0)) / n + 1e-30) ** (1 / 8)
+            loss += weights.parameter * (jnp.sum(jnp.where(valid, rel2 + outside, 0.0)) / n + last_exit)
         return loss
 
     return jnp.mean(jax.vmap(one)(recordings, a2_true))
