@@ -122,3 +122,17 @@ def test_gradients_match_finite_differences(ambient, plant):
         dn = dict(params, **{name: params[name] - h})
         fd = (float(f(up)) - float(f(dn))) / (2 * h)
         assert abs(float(g) - fd) <= 1e-4 * max(abs(fd), 1e-8), (name, float(g), fd)
+
+
+def test_unstable_fixed_steps_hold_last_finite_state_and_report_failure(ambient, plant):
+    """gamma far past the explicit step's stability limit: no NaN comes out, solver_ok says so."""
+    st = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
+    cfg = jd.ObserverConfig(gamma1=1e9, gamma2=1e9)
+    est = jax.jit(jd.estimate, static_argnums=3)(ambient.recording, plant, cfg, st)
+    assert not bool(est.solver_ok) and not bool(est.converged)
+    assert np.all(np.isfinite([float(est.a1), float(est.a2)]))
+
+
+def test_smape_of_nan_is_nan_not_zero():
+    assert np.isnan(float(jd._metrics.smape_percent(jnp.array([np.nan, 1.0]), jnp.array([1.0, 1.0]))))
+    assert float(jd._metrics.smape_percent(jnp.zeros(3), jnp.zeros(3))) == 0.0

@@ -6,10 +6,11 @@ import jax.numpy as jnp
 
 
 def smape_terms(estimate, measured):
-    """|z_hat - z| / (0.5 (|z_hat| + |z|)) per sample; 0 where both are exactly zero."""
+    """|z_hat - z| / (0.5 (|z_hat| + |z|)) per sample; 0 where both are exactly zero, NaN
+    where either is NaN (a failed simulation must not score as a perfect one)."""
     num = jnp.abs(estimate - measured)
     den = 0.5 * (jnp.abs(estimate) + jnp.abs(measured))
-    return jnp.where(den > 0, num / jnp.where(den > 0, den, 1.0), 0.0)
+    return jnp.where(den == 0, 0.0, num / jnp.where(den == 0, 1.0, den))
 
 
 def smape_percent(estimate, measured, mask=None):
