@@ -52,6 +52,26 @@ def test_loss_gradient_matches_finite_differences(short, plant):
     assert float(jnp.max(jnp.abs(g))) > 0
 
 
+def test_forward_mode_gradient_equals_reverse_mode(short, plant):
+    start = jd.ObserverConfig()
+    a2 = jnp.asarray([25.4])
+
+    def f(u):
+        return tuning_loss(from_log(u, start), short, plant, a2_true=a2)
+
+    u0 = jnp.linspace(-0.2, 0.2, len(TUNABLE))
+    v_rev, g_rev = jax.jit(jax.value_and_grad(f))(u0)
+    v_fwd, g_fwd = jax.jit(jax.value_and_grad(jd.forward_mode(f)))(u0)
+    assert float(v_fwd) == pytest.approx(float(v_rev), rel=1e-13)
+    np.testing.assert_allclose(g_fwd, g_rev, rtol=1e-9, atol=1e-12 * float(jnp.max(jnp.abs(g_rev))))
+    # optimistix linearises the objective: the linear map must be the gradient
+    v_lin, lin = jax.linearize(jd.forward_mode(f), u0)
+    e = jnp.zeros(len(TUNABLE)).at[3].set(1.0)
+    assert float(lin(e)) == pytest.approx(float(g_rev[3]), rel=1e-9)
+    with pytest.raises(ValueError, match="autodiff"):
+        jd.tune([short], plant, autodiff="backward")
+
+
 def test_vmap_of_grad_equals_grad_per_member(short, plant):
     start = jd.ObserverConfig()
     us = jnp.stack([jnp.zeros(len(TUNABLE)), jnp.full(len(TUNABLE), 0.1)])
@@ -91,3 +111,7 @@ def test_sweep_config_errors(tmp_path, capsys):
     bad.write_text(text.replace('file = "data/', f'file = "{EXAMPLES}/data/'))
     assert main(["sweep", str(bad)]) == 2
     assert "sweep.parameters" in capsys.readouterr().err
+    text = (EXAMPLES / "sweep_tune.toml").read_text().replace('autodiff = "auto"', 'autodiff = "rev"')
+    bad.write_text(text.replace('file = "data/', f'file = "{EXAMPLES}/data/'))
+    assert main(["tune", str(bad)]) == 2
+    assert "tune.autodiff" in capsys.readouterr().err

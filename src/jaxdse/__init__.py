@@ -52,5 +52,11 @@ from ._simulate import Simulation as Simulation
 from ._simulate import Truth as Truth
 from ._simulate import simulate as simulate
 from ._stream import estimate_stream as estimate_stream
+from ._sweep import sweep_configs as sweep_configs
+from ._tune import LossWeights as LossWeights
+from ._tune import TuneResult as TuneResult
+from ._tune import forward_mode as forward_mode
+from ._tune import tune as tune
+from ._tune import tuning_loss as tuning_loss
 
 __version__ = "0.1.0"

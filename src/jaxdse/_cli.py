@@ -102,12 +102,18 @@ before and after. The loss adds, per recording:
   x2         mean squared error of x2_hat vs the measured x2 after burn_in_s, / variance
   playback   the same for the playback P_t and x2
   parameter  (where a2_reference is given, e.g. synthetic data) time averages of
-             ((a2_hat - a2)/a2)^2 and of a smooth count of the time outside +-band
+             ((a2_hat - a2)/a2)^2 and of a smooth count of the time outside +-band,
+             plus a soft last exit time from the band (the 8-norm of t/T times outside)
+
+The gradient is taken in forward mode (one pass carrying one tangent per parameter) or
+reverse mode (back through the checkpointed time loop): autodiff = "auto" uses forward
+mode up to 8 training recordings, where it is the cheaper one.
 
   [tune]
   parameters = ["lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1", "gamma2", "k_obs"]
   max_steps = 30
   max_factor = 10.0
+  autodiff = "auto"        # or "fwd", "bwd"
   weights = { x2 = 1.0, playback = 1.0, parameter = 1.0, burn_in_s = 10.0, band = 0.01 }
 
 Writes DIR/tune.json (losses, history, start and tuned values) and DIR/tuned_observer.toml

@@ -11,8 +11,9 @@ Sections (every key optional unless marked; see ``examples/*.toml`` for commente
     [sweep]         for ``jaxdse sweep``: mode = "grid" | "random", draws, seed, chunk and
                     parameters = {name = [values...]} (grid) or {name = [low, high]} (random,
                     log-uniform); "gamma" sets gamma1 = gamma2
-    [tune]          for ``jaxdse tune``: parameters (list), max_steps, max_factor and
-                    weights = {x2, playback, parameter, burn_in_s, band}; role "auto"
+    [tune]          for ``jaxdse tune``: parameters (list), max_steps, max_factor, autodiff =
+                    "auto" | "fwd" | "bwd" and weights = {x2, playback, parameter,
+                    burn_in_s, band}; role "auto"
                     generators train, role "cross" generators are held out
     [output]        dir, figures, trajectories
     [[generator]]   name*, role, a2_reference, h_reference_s, and per-generator tables
@@ -207,7 +208,7 @@ def _sweep(path, table: dict, observer: ObserverConfig) -> dict:
 def _tune(path, table: dict) -> dict:
     from ._tune import TUNABLE, LossWeights
 
-    _no_unknown(path, table, {"parameters", "max_steps", "max_factor", "weights"}, "tune.")
+    _no_unknown(path, table, {"parameters", "max_steps", "max_factor", "weights", "autodiff"}, "tune.")
     names = table.get("parameters", list(TUNABLE))
     if not isinstance(names, list) or not names:
         raise InputError(path, "must be a non-empty list of names", key="tune.parameters")
@@ -218,13 +219,17 @@ def _tune(path, table: dict) -> dict:
     factor = _positive_number(path, table.get("max_factor", 10.0), "tune.max_factor")
     if factor <= 1:
         raise InputError(path, "must be > 1", key="tune.max_factor")
+    autodiff = table.get("autodiff", "auto")
+    if autodiff not in ("auto", "fwd", "bwd"):
+        raise InputError(path, "must be 'auto', 'fwd' or 'bwd'", key="tune.autodiff")
     weights = table.get("weights", {})
     if not isinstance(weights, dict):
         raise InputError(path, "must be a table", key="tune.weights")
     _no_unknown(path, weights, set(LossWeights.__dataclass_fields__), "tune.weights.")
     w = {k: _number(path, v, f"tune.weights.{k}") for k, v in weights.items()}
     names = [n for n in names if n != "gamma"] + (["gamma1", "gamma2"] if "gamma" in names else [])
-    return {"parameters": names, "max_steps": steps, "max_factor": factor, "weights": LossWeights(**w)}
+    return {"parameters": names, "max_steps": steps, "max_factor": factor, "autodiff": autodiff,
+            "weights": LossWeights(**w)}
 
 
 def _table(path, data, section, key) -> dict:

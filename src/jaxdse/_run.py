@@ -161,7 +161,7 @@ def run_tune(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> 
         return None if any(r is None for r in refs) else refs
 
     bar = Progress(tn.get("max_steps", 30), stream)
-    kwargs = {k: tn[k] for k in ("max_steps", "max_factor", "weights") if k in tn}
+    kwargs = {k: tn[k] for k in ("max_steps", "max_factor", "autodiff", "weights") if k in tn}
     t0 = time.perf_counter()
     res = tune([_first_segment(g, stream) for g in train], train[0].plant, cfg.observer, truths(train),
                heldout=[_first_segment(g, stream) for g in held], heldout_a2_true=truths(held),
