@@ -260,17 +260,20 @@ def gradient_cost(sims, plant, cfg, sizes):
         recs = jd.stack_recordings([sims[k % len(sims)].recording for k in range(n)])
         a2 = jnp.asarray([float(sims[k % len(sims)].truth.a2) for k in range(n)])
 
-        def loss(u, recs=recs, a2=a2):
+        def loss(u, recs, a2):  # the data as arguments, as in jd.tune (else XLA constant-folds)
             return jd.tuning_loss(from_log(u, cfg), recs, plant, TUNE_SETTINGS, a2)
 
-        fns = {"forward": jax.jit(loss), "fwd": jax.jit(jax.value_and_grad(jd.forward_mode(loss))),
+        def fwd_mode(u, recs, a2):
+            return jd.forward_mode(lambda v: loss(v, recs, a2))(u)
+
+        fns = {"forward": jax.jit(loss), "fwd": jax.jit(jax.value_and_grad(fwd_mode)),
                "bwd": jax.jit(jax.value_and_grad(loss))}
         u0 = to_log(cfg)
         times = {k: [] for k in fns}
         for _ in range(16):  # the first round compiles and warms up
             for k, f in fns.items():
                 t = time.perf_counter()
-                jax.block_until_ready(f(u0))
+                jax.block_until_ready(f(u0, recs, a2))
                 times[k].append(time.perf_counter() - t)
         best = {k: min(v[1:]) for k, v in times.items()}
         table[str(n)] = {"forward_s": best["forward"], "fwd_over_forward": best["fwd"] / best["forward"],

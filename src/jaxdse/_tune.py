@@ -175,27 +175,28 @@ def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = 
     train = stack_recordings(list(recordings))
     a2 = None if a2_true is None else jnp.asarray(a2_true, dtype=float)
 
-    def train_loss(u):
-        return tuning_loss(from_log(u, start, names, max_factor), train, plant, settings, a2, weights)
+    data = (train, a2)  # passed as arguments: closed over, XLA would constant-fold the front end
 
-    train_loss = forward_mode(train_loss) if autodiff == "fwd" else train_loss
+    def objective(u, data):  # (value, aux), as optimistix solvers take it
+        def loss(v):
+            return tuning_loss(from_log(v, start, names, max_factor), data[0], plant, settings, data[1],
+                               weights)
 
-    def objective(u, args):  # (value, aux), as optimistix solvers take it
-        return train_loss(u), None
+        return (forward_mode(loss) if autodiff == "fwd" else loss)(u), None
 
     solver = optx.BestSoFarMinimiser(optx.BFGS(rtol=rtol, atol=atol))
     u = to_log(start, names)
     f_struct = jax.ShapeDtypeStruct((), u.dtype)
-    state = solver.init(objective, u, None, {}, f_struct, None, frozenset())
-    step = eqx.filter_jit(lambda u, s: solver.step(objective, u, None, {}, s, frozenset()))
-    terminate = eqx.filter_jit(lambda u, s: solver.terminate(objective, u, None, {}, s, frozenset()))
+    state = solver.init(objective, u, data, {}, f_struct, None, frozenset())
+    step = eqx.filter_jit(lambda u, s, d: solver.step(objective, u, d, {}, s, frozenset()))
+    terminate = eqx.filter_jit(lambda u, s, d: solver.terminate(objective, u, d, {}, s, frozenset()))
     history, taken = [], 0
     for taken in range(1, max_steps + 1):
-        u, state, _ = step(u, state)
+        u, state, _ = step(u, state, data)
         history.append(float(state.best_loss))
         if progress is not None:
             progress(taken, history[-1])
-        if bool(terminate(u, state)[0]):
+        if bool(terminate(u, state, data)[0]):
             break
     best = from_log(state.best_y, start, names, max_factor)
     loss = eqx.filter_jit(tuning_loss)
