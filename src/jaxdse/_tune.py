@@ -25,8 +25,8 @@ gradient is taken in one of two modes (``autodiff``):
 
 ``"auto"`` picks forward mode up to ``FORWARD_MODE_MAX_RECORDINGS`` training recordings.
 Value-and-grad over the forward pass (``python benchmarks/run.py``, 2 CPU cores, 9
-parameters, 60 s recordings): 1, 4 and 16 recordings took 2.1, 3.1 and 5.0 in forward mode,
-against 5.0, 4.7 and 4.5 in reverse mode.
+parameters, 60 s recordings): 1, 4 and 16 recordings took 2.1, 3.0 and 4.9 in forward mode,
+against 4.7, 4.9 and 4.5 in reverse mode.
 """
 
 from __future__ import annotations
