@@ -174,16 +174,6 @@ def filterpy_ukf(u, y, x0, m, dt, a1, a2, joint, n=None):
 
 # --- memory cases, each in its own process ----------------------------------------------------
 
-def long_recording(plant, hours):
-    """A physical simulation of ``hours`` (ambient fluctuations, no seams): about 4 min for 24 h.
-
-    A 600 s simulation tiled to 24 h was tried first: each seam jumps the rotor angle against
-    the voltage angle, and a2_hat drifted from 26 to 3 within 6 h on it. On this recording
-    its largest error after the first hour was 1.0 % over 24 h (results.json)."""
-    sim = jd.simulate(plant, jd.Scenario(duration_s=hours * 3600.0, seed=7))
-    return sim.recording, sim
-
-
 FIELDS = ("t_s", "v_mag_pu", "v_ang_rad", "i_mag_pu", "i_ang_rad", "f_hz")
 
 
@@ -201,7 +191,11 @@ def memory_case(case, folder):
     the estimation's own (plus the JAX runtime, reported as ``baseline_rss_gib``)."""
     folder = Path(folder)
     if case.startswith("prepare"):
-        rec, sim = long_recording(jd.Plant(), float(case.split(":")[1]))
+        # A physical simulation (ambient fluctuations, no seams), ~4 min for 24 h. A 600 s
+        # simulation tiled to 24 h was tried first: each seam jumps the rotor angle against
+        # the voltage angle, and a2_hat drifted from 26 to 3 within 6 h on it.
+        sim = jd.simulate(jd.Plant(), jd.Scenario(duration_s=float(case.split(":")[1]) * 3600.0, seed=7))
+        rec = sim.recording
         folder.mkdir(parents=True, exist_ok=True)
         for k in FIELDS:
             np.save(folder / f"{k}.npy", np.asarray(getattr(rec, k)))
@@ -254,7 +248,7 @@ def gradient_cost(sims, plant, cfg, sizes):
     hits all of them. ``grad_over_forward`` is the mode ``jd.tune`` picks by default
     (``autodiff="auto"``) for 4 training recordings, as in ``experiments/tuning``.
     """
-    from jaxdse._tune import FORWARD_MODE_MAX_RECORDINGS, TUNE_SETTINGS, from_log, to_log
+    from jaxdse._tune import TUNE_SETTINGS, from_log, resolve_autodiff, to_log
     table = {}
     for n in sizes:
         recs = jd.stack_recordings([sims[k % len(sims)].recording for k in range(n)])
@@ -281,7 +275,7 @@ def gradient_cost(sims, plant, cfg, sizes):
         print(f"gradient, {n} recordings: forward {best['forward'] * 1e3:.1f} ms, value-and-grad "
               f"fwd {best['fwd'] / best['forward']:.2f}x, bwd {best['bwd'] / best['forward']:.2f}x",
               flush=True)
-    mode = "fwd" if 4 <= FORWARD_MODE_MAX_RECORDINGS else "bwd"
+    mode = resolve_autodiff("auto", 4)
     return {"grad_over_forward": table["4"][f"{mode}_over_forward"], "grad_mode": mode,
             "grad_over_forward_reverse": table["4"]["bwd_over_forward"], "grad_by_recordings": table}
 

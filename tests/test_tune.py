@@ -35,14 +35,20 @@ def test_log_transform_round_trip():
     assert float(far.gamma1) <= 8500.0 + 1e-6  # bounded to max_factor
 
 
-def test_loss_gradient_matches_finite_differences(short, plant):
+@pytest.fixture(scope="module")
+def loss_at(short, plant):
+    """The tuning loss of the short recording (a2 known) as a function of the log coordinates,
+    and a point away from the start."""
     start = jd.ObserverConfig()
-    a2 = jnp.asarray([25.4])
 
     def f(u):
-        return tuning_loss(from_log(u, start), short, plant, a2_true=a2)
+        return tuning_loss(from_log(u, start), short, plant, a2_true=jnp.asarray([25.4]))
 
-    u0 = jnp.linspace(-0.2, 0.2, len(TUNABLE))
+    return f, jnp.linspace(-0.2, 0.2, len(TUNABLE))
+
+
+def test_loss_gradient_matches_finite_differences(loss_at):
+    f, u0 = loss_at
     g = jax.jit(jax.grad(f))(u0)
     fj = jax.jit(f)
     for k in range(len(TUNABLE)):
@@ -52,20 +58,14 @@ def test_loss_gradient_matches_finite_differences(short, plant):
     assert float(jnp.max(jnp.abs(g))) > 0
 
 
-def test_forward_mode_gradient_equals_reverse_mode(short, plant):
-    start = jd.ObserverConfig()
-    a2 = jnp.asarray([25.4])
-
-    def f(u):
-        return tuning_loss(from_log(u, start), short, plant, a2_true=a2)
-
-    u0 = jnp.linspace(-0.2, 0.2, len(TUNABLE))
+def test_forward_mode_gradient_equals_reverse_mode(loss_at, short, plant):
+    f, u0 = loss_at
     v_rev, g_rev = jax.jit(jax.value_and_grad(f))(u0)
     v_fwd, g_fwd = jax.jit(jax.value_and_grad(jd.forward_mode(f)))(u0)
     assert float(v_fwd) == pytest.approx(float(v_rev), rel=1e-13)
     np.testing.assert_allclose(g_fwd, g_rev, rtol=1e-9, atol=1e-12 * float(jnp.max(jnp.abs(g_rev))))
     # optimistix linearises the objective: the linear map must be the gradient
-    v_lin, lin = jax.linearize(jd.forward_mode(f), u0)
+    _, lin = jax.linearize(jd.forward_mode(f), u0)
     e = jnp.zeros(len(TUNABLE)).at[3].set(1.0)
     assert float(lin(e)) == pytest.approx(float(g_rev[3]), rel=1e-9)
     with pytest.raises(ValueError, match="autodiff"):

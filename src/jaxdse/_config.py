@@ -206,7 +206,7 @@ def _sweep(path, table: dict, observer: ObserverConfig) -> dict:
 
 
 def _tune(path, table: dict) -> dict:
-    from ._tune import TUNABLE, LossWeights
+    from ._tune import AUTODIFF_MODES, TUNABLE, LossWeights
 
     _no_unknown(path, table, {"parameters", "max_steps", "max_factor", "weights", "autodiff"}, "tune.")
     names = table.get("parameters", list(TUNABLE))
@@ -220,8 +220,8 @@ def _tune(path, table: dict) -> dict:
     if factor <= 1:
         raise InputError(path, "must be > 1", key="tune.max_factor")
     autodiff = table.get("autodiff", "auto")
-    if autodiff not in ("auto", "fwd", "bwd"):
-        raise InputError(path, "must be 'auto', 'fwd' or 'bwd'", key="tune.autodiff")
+    if autodiff not in AUTODIFF_MODES:
+        raise InputError(path, f"must be one of {', '.join(AUTODIFF_MODES)}", key="tune.autodiff")
     weights = table.get("weights", {})
     if not isinstance(weights, dict):
         raise InputError(path, "must be a table", key="tune.weights")

@@ -6,9 +6,9 @@ sample interval (the inputs are affine inside it), or one call of the solver's `
 for fixed steps. The scan is nested: an outer scan over
 blocks of ``block`` samples, each block (and each step within it) rematerialised in the
 backward pass (``jax.checkpoint``), so reverse-mode memory grows with the number of blocks,
-not with the number of solver stages. Per block, the caller either keeps every state or reduces them to
-a small summary (``reduce``), so that long recordings and large sweeps need not store
-trajectories. Samples after the valid ones (padding) hold the state. Only the inputs are
+not with the number of solver stages. Per block, the caller either keeps every state or
+reduces them to a small summary (``reduce``), so that long recordings and large sweeps need
+not store trajectories. Samples after the valid ones (padding) hold the state. Only the inputs are
 scanned over; the time, the sample index and the previous sample's inputs ride in the
 carry, which saves a padded, transposed copy of each per vmapped batch.
 

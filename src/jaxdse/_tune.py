@@ -49,6 +49,7 @@ from ._recording import Recording
 TUNABLE = ("lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1", "gamma2", "k_obs")
 """Observer parameters that :func:`tune` adjusts by default (paper Table I)."""
 
+AUTODIFF_MODES = ("auto", "fwd", "bwd")
 FORWARD_MODE_MAX_RECORDINGS = 8
 """``autodiff="auto"`` uses forward mode up to this many training recordings."""
 
@@ -116,6 +117,15 @@ def tuning_loss(config: ObserverConfig, recordings: Recording, plant: Plant,
     return jnp.mean(jax.vmap(one)(recordings, a2_true))
 
 
+def resolve_autodiff(autodiff: str, n_recordings: int) -> str:
+    """"fwd" or "bwd": ``autodiff`` itself, or for "auto" the cheaper one for that many recordings."""
+    if autodiff not in AUTODIFF_MODES:
+        raise ValueError(f"autodiff must be one of {AUTODIFF_MODES}, got {autodiff!r}")
+    if autodiff != "auto":
+        return autodiff
+    return "fwd" if n_recordings <= FORWARD_MODE_MAX_RECORDINGS else "bwd"
+
+
 def forward_mode(fn: Callable[[jax.Array], jax.Array]) -> Callable[[jax.Array], jax.Array]:
     """``fn`` (vector -> scalar) whose derivative JAX takes in forward mode.
 
@@ -167,10 +177,7 @@ def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = 
             see the module docstring. Both give the same gradient to round-off.
         progress: called with (step, training loss) after each optimiser step.
     """
-    if autodiff not in ("auto", "fwd", "bwd"):
-        raise ValueError(f"autodiff must be 'auto', 'fwd' or 'bwd', got {autodiff!r}")
-    if autodiff == "auto":
-        autodiff = "fwd" if len(recordings) <= FORWARD_MODE_MAX_RECORDINGS else "bwd"
+    autodiff = resolve_autodiff(autodiff, len(recordings))
     names = tuple(names)
     train = stack_recordings(list(recordings))
     a2 = None if a2_true is None else jnp.asarray(a2_true, dtype=float)
