@@ -38,14 +38,11 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from numpy_reference import observer_loop  # noqa: E402  (beside this script)
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._estimate import front_end, playback_inputs, reference_torque  # noqa: E402
-from jaxdse._machine import electrical_torque, stator_currents, terminal_dq, terminal_power  # noqa: E402
 
 HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE))
-from numpy_reference import observer_loop  # noqa: E402
 
 try:  # benchmark extras: pip install -e .[bench]
     from dynamax.nonlinear_gaussian_ssm import ParamsNLGSSM, UKFHyperParams, unscented_kalman_filter
@@ -84,16 +81,10 @@ def tile(sims, batch):
 
 def ukf_inputs(sim, plant):
     """Terminal |V|, angle, Ef, Tm (same front end as jaxdse) and measured P_t, Q_t."""
-    rec = sim.recording
-    fe = front_end(rec, plant)
-    st = jd.Settings()
-    t_ref = reference_torque(rec.t_s, fe, plant.governor, st)
-    est = jax.jit(jd.estimate)(rec, plant, jd.ObserverConfig(), st)
-    pb_in, _, meas = playback_inputs(fe, est.t_m_pu, fe.alg.delta_rad[0], t_ref, plant, st,
-                                     rec.t_s[1] - rec.t_s[0])
-    u = np.stack([pb_in.v_mag, pb_in.theta, pb_in.e_f, pb_in.t_m], axis=1)
-    y = np.stack([meas[2], meas[3]], axis=1)
-    x0 = np.array([0.0, float(fe.x2_meas[0]), float(fe.alg.e_q1_pu[0])])
+    tr = jax.jit(jd.estimate)(sim.recording, plant, jd.ObserverConfig(), jd.Settings()).trajectories
+    u = np.stack([tr.v_t_pu, tr.theta_t_rad, tr.e_f_pu, tr.t_m_pu], axis=1)
+    y = np.stack([tr.p_t_pu, tr.q_t_pu], axis=1)
+    x0 = np.array([0.0, float(tr.x2_meas_rad_s[0]), float(tr.e_q1_pu[0])])
     return u, y, x0
 
 
@@ -101,8 +92,8 @@ def model_step(x, u, a1, a2, m, dt, xp=jnp):
     """One Heun step of (delta, x2, E'q) with inputs held over the sample interval."""
     def f(x):
         v_d, v_q = xp.sin(x[0] - u[1]) * u[0], xp.cos(x[0] - u[1]) * u[0]
-        i_d, i_q = stator_currents(x[2], v_d, v_q, m)
-        t_e = electrical_torque(x[2], i_d, i_q, m)
+        i_d, i_q = jd.stator_currents(x[2], v_d, v_q, m)
+        t_e = jd.electrical_torque(x[2], i_d, i_q, m)
         return xp.stack([x[1], -a1 * x[1] + a2 * (u[3] - t_e),
                          (-x[2] - (m.xd_pu - m.xd1_pu) * i_d + u[2]) / m.td01_s])
     k1 = f(x)
@@ -111,9 +102,9 @@ def model_step(x, u, a1, a2, m, dt, xp=jnp):
 
 
 def model_output(x, u, m, xp=jnp):
-    v_d, v_q = terminal_dq(u[0], u[1], x[0])
-    i_d, i_q = stator_currents(x[2], v_d, v_q, m)
-    p, q = terminal_power(v_d, v_q, i_d, i_q)
+    v_d, v_q = jd.terminal_dq(u[0], u[1], x[0])
+    i_d, i_q = jd.stator_currents(x[2], v_d, v_q, m)
+    p, q = jd.terminal_power(v_d, v_q, i_d, i_q)
     return xp.stack([p, q])
 
 
@@ -248,21 +239,20 @@ def gradient_cost(sims, plant, cfg, sizes):
     hits all of them. ``grad_over_forward`` is the mode ``jd.tune`` picks by default
     (``autodiff="auto"``) for 4 training recordings, as in ``experiments/tuning``.
     """
-    from jaxdse._tune import TUNE_SETTINGS, from_log, resolve_autodiff, to_log
     table = {}
     for n in sizes:
         recs = jd.stack_recordings([sims[k % len(sims)].recording for k in range(n)])
         a2 = jnp.asarray([float(sims[k % len(sims)].truth.a2) for k in range(n)])
 
         def loss(u, recs, a2):  # the data as arguments, as in jd.tune (else XLA constant-folds)
-            return jd.tuning_loss(from_log(u, cfg), recs, plant, TUNE_SETTINGS, a2)
+            return jd.tuning_loss(jd.from_log(u, cfg), recs, plant, jd.Settings.fast(), a2)
 
         def fwd_mode(u, recs, a2):
             return jd.forward_mode(lambda v: loss(v, recs, a2))(u)
 
         fns = {"forward": jax.jit(loss), "fwd": jax.jit(jax.value_and_grad(fwd_mode)),
                "bwd": jax.jit(jax.value_and_grad(loss))}
-        u0 = to_log(cfg)
+        u0 = jd.to_log(cfg)
         times = {k: [] for k in fns}
         for _ in range(16):  # the first round compiles and warms up
             for k, f in fns.items():
@@ -275,7 +265,7 @@ def gradient_cost(sims, plant, cfg, sizes):
         print(f"gradient, {n} recordings: forward {best['forward'] * 1e3:.1f} ms, value-and-grad "
               f"fwd {best['fwd'] / best['forward']:.2f}x, bwd {best['bwd'] / best['forward']:.2f}x",
               flush=True)
-    mode = resolve_autodiff("auto", 4)
+    mode = jd.resolve_autodiff("auto", 4)
     return {"grad_over_forward": table["4"][f"{mode}_over_forward"], "grad_mode": mode,
             "grad_over_forward_reverse": table["4"]["bwd_over_forward"], "grad_by_recordings": table}
 
@@ -327,7 +317,7 @@ def main() -> None:
         e = jd.estimate_batch(recs, plant, cfg, st, None, a2_true)
         acc[label] = {"a2_error_percent_median_abs": float(np.median(np.abs(100 * (e.a2 - a2_true) / a2_true)))}  # noqa: E501
     traj = jd.estimate_batch(recs, plant, cfg, jd.Settings(observer_integrator=jd.Integrator.fast(),
-                                                           playback=False))
+                                                           playback=False)).trajectories
     x2_true = np.stack([np.asarray(s.truth.x2_rad_s) for s in sims])
     acc["fast (Heun, 1 step/sample)"]["x2_rmse_rad_s_median"] = float(np.median(
         np.sqrt(np.mean((traj.x2_hat_rad_s - x2_true)[:, n_t // 2:] ** 2, axis=1))))
@@ -335,14 +325,14 @@ def main() -> None:
 
     # NumPy reference on recording 0
     rec0 = sims[0].recording
-    fe = front_end(rec0, plant)
-    t_ref = float(reference_torque(rec0.t_s, fe, plant.governor, jd.Settings()))
-    delta = np.asarray(fe.alg.delta_rad - fe.alg.delta_rad[0])
+    front = jax.jit(jd.estimate, static_argnums=3)(rec0, plant, cfg, jd.Settings(playback=False))
+    tr = front.trajectories
     cfg_d = {f: float(getattr(cfg, f)) for f in cfg.__dataclass_fields__}
     gov_d = {f: float(getattr(plant.governor, f)) for f in plant.governor.__dataclass_fields__}
     t = time.perf_counter()
-    theta = observer_loop(np.asarray(rec0.t_s), delta, np.asarray(fe.alg.t_e_pu), np.asarray(fe.dw),
-                          float(fe.x2_meas[0]), t_ref, cfg_d, gov_d)
+    theta = observer_loop(np.asarray(rec0.t_s), np.asarray(tr.delta_rad), np.asarray(tr.t_e_pu),
+                          np.asarray(tr.x2_meas_rad_s / m.omega_s), float(tr.x2_meas_rad_s[0]),
+                          float(front.t_ref_pu), cfg_d, gov_d)
     res["numpy_reference_gen_samples_per_s"] = n_t / (time.perf_counter() - t)
     res["numpy_reference_a2_minus_jaxdse"] = float(theta[-1, 1] - jd.estimate_batch(
         [rec0], plant, cfg, FAST).a2[0])

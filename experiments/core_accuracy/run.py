@@ -20,7 +20,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._demo import demo_scenarios  # noqa: E402
 
 HERE = Path(__file__).parent
 
@@ -33,7 +32,7 @@ def main() -> None:
     run = jax.jit(jd.estimate)
     rows = []
     for seed in range(args.seeds):
-        for name, sc in demo_scenarios(seed=100 * seed).items():
+        for name, sc in jd.demo_scenarios(seed=100 * seed).items():
             sim = jd.simulate(plant, sc)
             tr = sim.truth
             cases = {
@@ -44,7 +43,7 @@ def main() -> None:
                 est = run(rec, plant, cfg, st, tr.t_m_pu, tr.a2)
                 after = np.asarray(est.time_s) >= (float(est.convergence_time_s)
                                                    if bool(est.converged) else 0.0)
-                x2_err = np.asarray(est.x2_hat_rad_s - tr.x2_rad_s)[after]
+                x2_err = np.asarray(est.trajectories.x2_hat_rad_s - tr.x2_rad_s)[after]
                 rows.append({
                     "seed": seed, "recording": name, "case": case,
                     "a2_true": float(tr.a2), "a2_hat": float(est.a2),

@@ -22,7 +22,6 @@ import matplotlib  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._report import plot_estimates, summary_entry  # noqa: E402
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -67,7 +66,7 @@ def main():
         rec = segments[0][1]
         recs[g.name] = (rec, g)
         est = run(rec, g.plant, cfg.observer, cfg.settings)
-        e = summary_entry(g.name, est)
+        e = jd.summary_entry(g.name, est)
         e["role"] = g.role
         e["s_rated_mva"] = float(g.plant.machine.s_rated_mva)
         e["kinetic_energy_mws"] = e["H_s"] * e["s_rated_mva"] if e["H_s"] is not None else None
@@ -78,7 +77,7 @@ def main():
         e["data_quality"] = quality
         entries.append(e)
         ests[g.name] = est
-        plot_estimates(est, g.name, HERE)
+        jd.plot_estimates(est, g.name, HERE)
         print(f"[isone] {g.name}: a2 {e['a2']:.2f}, H {e['H_s']:.2f} s", file=sys.stderr)
 
     # Sensitivity of H to each assumption, on every generator.

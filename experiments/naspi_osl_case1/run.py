@@ -22,7 +22,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._report import summary_entry  # noqa: E402
 
 HERE = Path(__file__).parent
 SHARED = HERE.parents[2] / "shared" / "data"
@@ -148,7 +147,7 @@ def main():
             continue
         rec = segments[0][1]
         est = run(rec, g.plant, cfg.observer, cfg.settings)
-        e = summary_entry(g.name, est, h_reference_s=g.h_reference_s)
+        e = jd.summary_entry(g.name, est, h_reference_s=g.h_reference_s)
         e.update({"bus": p["bus"], "s_mva": float(g.plant.machine.s_rated_mva),
                   "units": [u["id"] for u in p["units"]],
                   "governor": sorted({u["governor"][0] or "none" for u in p["units"]}),

@@ -26,8 +26,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._metrics import smape_percent  # noqa: E402
-from jaxdse._tune import config_values  # noqa: E402
 
 HERE = Path(__file__).parent
 SMAPE_FROM_S = 30.0
@@ -54,7 +52,9 @@ def main() -> None:
     rows = {}
     for label, cfg in (("default (Table I)", jd.ObserverConfig()), ("tuned", res.config)):
         e = jd.estimate_batch([s.recording for s in held], plant, cfg, st, None, a2)
-        x2_smape = [float(smape_percent(e.x2_hat_rad_s[k], e.x2_meas_rad_s[k], e.time_s[k] >= SMAPE_FROM_S))
+        tr = e.trajectories
+        x2_smape = [float(jd.smape_percent(tr.x2_hat_rad_s[k], tr.x2_meas_rad_s[k],
+                                           e.time_s[k] >= SMAPE_FROM_S))
                     for k in range(len(held))]
         rows[label] = {
             "convergence_time_s": [None if np.isnan(x) else float(x) for x in e.convergence_time_s],
@@ -68,7 +68,8 @@ def main() -> None:
         }
     d, t = rows["default (Table I)"], rows["tuned"]
     speedup = d["median_convergence_time_s"] / t["median_convergence_time_s"]
-    out = {"config_start": config_values(jd.ObserverConfig()), "config_tuned": config_values(res.config),
+    out = {"config_start": jd.config_values(jd.ObserverConfig()),
+           "config_tuned": jd.config_values(res.config),
            "train_loss": [res.loss_start, res.loss_tuned],
            "heldout_loss": [res.heldout_loss_start, res.heldout_loss_tuned], "steps": res.steps,
            "history": list(res.history), "tune_wall_s": round(tune_s, 1), "heldout": rows,

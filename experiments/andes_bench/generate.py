@@ -1,0 +1,1052 @@
+"""Independent-simulator test bench for jaxdse: PMU-like recordings simulated with ANDES.
+
+What it makes, for each case c in {ieee14, npcc, wecc}, under ``data/<c>/``:
+
+* ``line_trip.csv.gz``, ``load_step.csv.gz``, ``gen_trip.csv.gz`` (70 s, event at t = 10 s, 60 frames/s)
+  and ``ambient.csv.gz`` (600 s, Ornstein-Uhlenbeck load fluctuations, 30 frames/s): noise-free
+  terminal measurements of the recorded GENROU machines, columns ``time_s`` then, per machine tag
+  ``B<bus>_G<id>``, ``<tag>/F`` [Hz], ``<tag>/VM`` [pu of bus kV], ``<tag>/VA`` [deg, wrapped to
+  (-180, 180]], ``<tag>/IM`` [pu on the system base at the bus kV base], ``<tag>/IA`` [deg, wrapped];
+  the current is the machine's own output current (generator convention, out of the machine).
+* ``<event>_truth.csv.gz``: rotor angle, speed, mechanical and electrical torque of the recorded
+  machines at the same frames.
+* ``truth.json``: machine data (H, D, GENROU, governor, exciter, PSS), events, load model,
+  statistics and the self-checks.
+* ``<c>.raw`` (PSS/E v33) and ``<c>.dyr``: the simulated system, written from the ANDES data.
+
+The script also re-reads its own .raw/.dyr with ANDES and checks that they reproduce the power flow,
+the dynamic data and a short line-trip simulation.
+
+ANDES is GPL-3. This script is the only file of the project that imports it; the project never
+imports ANDES, and no ANDES code or case file is stored here, only the outputs of this script.
+ANDES: H. Cui, F. Li, K. Tomsovic, "Hybrid Symbolic-Numeric Framework for Power System Modeling
+and Analysis," IEEE Transactions on Power Systems, vol. 36, no. 2, pp. 1373-1384, 2021.
+
+Install ANDES in its own virtual environment (never in the project's) and run from the repo root::
+
+    python3 -m venv /work/andes-venv && /work/andes-venv/bin/pip install andes==2.0.0
+    /work/andes-venv/bin/python experiments/andes_bench/generate.py                # all cases
+    /work/andes-venv/bin/python experiments/andes_bench/generate.py --case ieee14  # one case
+
+Options: ``--scenario`` (any of line_trip, load_step, gen_trip, ambient; none: only rewrite and
+verify the .raw/.dyr), ``--no-verify`` (skip the .raw/.dyr round trip), ``--step-check`` (rerun at
+half the step and record the largest differences). Several runs of one case (e.g. one per scenario,
+in parallel) merge their results into truth.json. Output is deterministic (seeded noise, gzip
+without timestamps).
+
+Runtime: ANDES takes about 2.7 ms (ieee14), 4 ms (npcc) and 5 ms (wecc) per integration step on an
+idle core; a case is 3 x 16,800 event steps + 72,000 ambient steps + the round trip, i.e. about
+6 min (ieee14), 9 min (npcc) and 11 min (wecc) on an idle machine, several times that on a busy one.
+"""
+
+from __future__ import annotations
+
+import argparse
+import gzip
+import io
+import json
+import logging
+import time
+from pathlib import Path
+
+import andes
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+DATA = HERE / "data"
+
+STEP_RATE = 240  # integration steps per second: h = 1/240 s, 4 steps per 60 fps event frame
+AMBIENT_STEP_RATE = 120  # ambient: h = 1/120 s, 4 steps per 30 fps frame (the OU path lives on 1/240 s)
+TDS_TOL = 1e-6  # Newton tolerance of the ANDES implicit trapezoid
+T_EVENT = 10.0
+T_EVENT_RUN = 70.0
+T_AMBIENT = 600.0
+FPS = {"line_trip": 60, "load_step": 60, "gen_trip": 60, "ambient": 30}
+SCENARIOS = tuple(FPS)
+LOAD_STEP_FRACTION = 0.05  # load step: 5 % of the total system load
+LOAD_STEP_MAX_RISE = 0.25  # ... spread over the nearest loads so that none rises by more than 25 %
+GEN_TRIP_FRACTION = 0.03  # generator trip: the unrecorded unit whose output is nearest 3 % of load
+OU_TAU_S = 5.0  # ambient: time constant of every load's Ornstein-Uhlenbeck process
+
+CASES = {
+    "ieee14": {"files": ("ieee14/ieee14_full.xlsx",), "n_record": None, "ou_sigma": 0.03, "seed": 14},
+    "npcc": {"files": ("npcc/npcc.raw", "npcc/npcc_full.dyr"), "n_record": 10, "ou_sigma": 0.03,
+             "seed": 140},
+    "wecc": {"files": ("wecc/wecc.raw", "wecc/wecc_full.dyr"), "n_record": 10, "ou_sigma": 0.05,
+             "seed": 179},
+}
+
+# Standard models with typical data, added only to GENROU units that the case leaves without one.
+ADDED_EXCITER = ("SEXS", {"TATB": 0.1, "TB": 10.0, "K": 100.0, "TE": 0.05, "EMIN": 0.0, "EMAX": 5.0})
+ADDED_GOVERNOR = ("TGOV1", {"R": 0.05, "T1": 0.5, "VMAX": 1.05, "VMIN": 0.0, "T2": 1.0, "T3": 2.1,
+                            "Dt": 0.0})
+
+# PSS/E .dyr record layouts: ICONs (written first) and CONs in PSS/E order, as ANDES parameter names.
+# Values are on the machine base, as ANDES takes them from a .dyr ("vin").
+DYR = {
+    "GENROU": ((), ("Td10", "Td20", "Tq10", "Tq20", "H", "D", "xd", "xq", "xd1", "xq1", "xd2", "xl",
+                    "S10", "S12")),
+    "GENCLS": ((), ("H", "D")),
+    "TGOV1": ((), ("R", "T1", "VMAX", "VMIN", "T2", "T3", "Dt")),
+    "IEEEG1": (("syn2_bus", "syn2_id"), ("K", "T1", "T2", "T3", "UO", "UC", "PMAX", "PMIN", "T4", "K1",
+                                         "K2", "T5", "K3", "K4", "T6", "K5", "K6", "T7", "K7", "K8")),
+    "IEEEX1": ((), ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF1", "TF1", "Switch",
+                    "E1", "SE1", "E2", "SE2")),
+    "ESDC2A": ((), ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF1", "Switch",
+                    "E1", "SE1", "E2", "SE2")),
+    "EXST1": ((), ("TR", "VIMAX", "VIMIN", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KC", "KF", "TF")),
+    "ESST3A": ((), ("TR", "VIMAX", "VIMIN", "KM", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KG", "KP",
+                    "KI", "VBMAX", "KC", "XL", "VGMAX", "THETAP", "TM", "VMMAX", "VMMIN")),
+    "SEXS": ((), ("TATB", "TB", "K", "TE", "EMIN", "EMAX")),
+    "IEEEST": (("MODE", "busr"), ("A1", "A2", "A3", "A4", "A5", "A6", "T1", "T2", "T3", "T4", "T5", "T6",
+                                  "KS", "LSMAX", "LSMIN", "VCU", "VCL")),
+    "ST2CUT": (("MODE", "busr", "MODE2", "busr2"), ("K1", "K2", "T1", "T2", "T3", "T4", "T5", "T6", "T7",
+                                                    "T8", "T9", "T10", "LSMAX", "LSMIN", "VCU", "VCL")),
+}
+GENROU_PARAMS = ("ra", "xl", "xd", "xq", "xd1", "xq1", "xd2", "xq2", "Td10", "Tq10", "Td20", "Tq20",
+                 "S10", "S12")
+MEANING = {
+    "TGOV1": "R droop [pu speed/pu power], T1 valve [s], VMAX/VMIN valve limits [pu], T2/T3 lead/lag [s], "
+             "Dt turbine damping [pu]",
+    "IEEEG1": "PSS/E IEEEG1 (K=1/R, T1..T7 [s], UO/UC valve rates [pu/s], PMAX/PMIN [pu], K1..K8 fractions)",
+    "IEEEX1": "PSS/E IEEEX1 (IEEE DC1A-like), limits and gains in pu",
+    "ESDC2A": "PSS/E ESDC2A (IEEE DC2A)",
+    "EXST1": "PSS/E EXST1 (IEEE ST1)",
+    "ESST3A": "PSS/E ESST3A (IEEE ST3A)",
+    "SEXS": "PSS/E SEXS simplified excitation system",
+    "IEEEST": "PSS/E IEEEST stabilizer (ICONs: input MODE, remote bus)",
+    "ST2CUT": "PSS/E ST2CUT stabilizer (ICONs: MODE, bus, MODE2, bus2)",
+}
+
+log = logging.getLogger("andes_bench")
+
+
+# ----------------------------------------------------------------------------------------------------
+# case set-up
+# ----------------------------------------------------------------------------------------------------
+
+def _group_links(ss, group, key):
+    """{controlled device idx: (model name, own idx)} for the in-service devices of a group."""
+    out = {}
+    for name, mdl in ss.groups[group].models.items():
+        for idx, dev, u in zip(mdl.idx.v, getattr(mdl, key).v, mdl.u.v):
+            if u:
+                out[dev] = (name, idx)
+    return out
+
+
+def load_case(case, events=()):
+    """Load a shipped ANDES case, add the missing standard controls and the given events; solve the PF."""
+    files = [andes.get_case(f) for f in CASES[case]["files"]]
+    ss = andes.load(files[0], addfile=files[1] if len(files) > 1 else None, setup=False,
+                    no_output=True, default_config=True)
+    gov = _group_links(ss, "TurbineGov", "syn")
+    exc = _group_links(ss, "Exciter", "syn")
+    added = []
+    for gidx, u in zip(ss.GENROU.idx.v, ss.GENROU.u.v):
+        if not u:
+            continue
+        if gidx not in gov:
+            ss.add(ADDED_GOVERNOR[0], {"syn": gidx, "idx": f"added_{ADDED_GOVERNOR[0]}_{gidx}",
+                                       **ADDED_GOVERNOR[1]})
+            added.append((gidx, ADDED_GOVERNOR[0]))
+        if gidx not in exc:
+            ss.add(ADDED_EXCITER[0], {"syn": gidx, "idx": f"added_{ADDED_EXCITER[0]}_{gidx}",
+                                      **ADDED_EXCITER[1]})
+            added.append((gidx, ADDED_EXCITER[0]))
+    for model, params in events:
+        ss.add(model, params)
+    ss.setup()
+    if not ss.PFlow.run():
+        raise RuntimeError(f"{case}: power flow did not converge")
+    ss.bench_added = added
+    return ss
+
+
+def _norm_id(sub):
+    """PSS/E machine ID as text: the .raw ID where the case has one (1.0 -> '1'), else '1'."""
+    if sub is None or str(sub).strip() in ("", "None"):
+        return "1"
+    try:
+        f = float(sub)
+    except ValueError:
+        return str(sub).strip()
+    if np.isnan(f):
+        return "1"
+    return str(int(f)) if f == int(f) else str(sub).strip()
+
+
+def machine_id(ss, uid):
+    return _norm_id(ss.GENROU.subidx.v[uid])
+
+
+def gen_ids(ss):
+    """PSS/E machine ID of every static generator."""
+    out = {}
+    for mdl in (ss.PV, ss.Slack):
+        for idx, sub in zip(mdl.idx.v, mdl.subidx.v):
+            out[idx] = _norm_id(sub)
+    return out
+
+
+def select_machines(ss, case):
+    """Recorded machines: all GENROU of ieee14; else the n largest MBASE among GENROU units that the
+    shipped case equips with both a governor and an exciter (ties: lower bus number first)."""
+    gov = _group_links(ss, "TurbineGov", "syn")
+    exc = _group_links(ss, "Exciter", "syn")
+    added = {g for g, _ in ss.bench_added}
+    cand = [i for i in range(ss.GENROU.n) if ss.GENROU.u.v[i] and ss.GENROU.idx.v[i] in gov
+            and ss.GENROU.idx.v[i] in exc and ss.GENROU.idx.v[i] not in added]
+    cand.sort(key=lambda i: (-ss.GENROU.Sn.v[i], int(ss.GENROU.bus.v[i]), machine_id(ss, i)))
+    n = CASES[case]["n_record"]
+    return cand if n is None else cand[:n]
+
+
+def _branch_kind(ss):
+    line = ss.Line
+    return (np.asarray(line.trans.v) != 0) | (np.asarray(line.tap.v) != 1) | (np.asarray(line.phi.v) != 0)
+
+
+def _connected(ss, skip):
+    """True if the in-service branches other than index ``skip`` connect all buses."""
+    buses = list(ss.Bus.idx.v)
+    parent = {b: b for b in buses}
+
+    def find(b):
+        while parent[b] != b:
+            parent[b] = parent[parent[b]]
+            b = parent[b]
+        return b
+
+    for i, (b1, b2, u) in enumerate(zip(ss.Line.bus1.v, ss.Line.bus2.v, ss.Line.u.v)):
+        if u and i != skip:
+            parent[find(b1)] = find(b2)
+    return len({find(b) for b in buses}) == 1
+
+
+def _bus_phasors(ss):
+    v = np.asarray(ss.Bus.v.v) * np.exp(1j * np.asarray(ss.Bus.a.v))
+    return dict(zip(ss.Bus.idx.v, v))
+
+
+def choose_events(ss, case, machines):
+    """The three events, chosen by fixed rules on the base-case power flow."""
+    sb = ss.config.mva
+    vb = _bus_phasors(ss)
+    total_load = float(np.sum(np.asarray(ss.PQ.p0.v)[np.asarray(ss.PQ.u.v) > 0]))
+    # line trip: the in-service non-transformer line between buses of equal base kV with the
+    # largest active-power flow whose loss leaves the network connected
+    is_tf = _branch_kind(ss)
+    best = None
+    for i in range(ss.Line.n):
+        if not ss.Line.u.v[i] or is_tf[i] or ss.Line.Vn1.v[i] != ss.Line.Vn2.v[i]:
+            continue
+        v1, v2 = vb[ss.Line.bus1.v[i]], vb[ss.Line.bus2.v[i]]
+        y = 1 / complex(ss.Line.r.v[i], ss.Line.x.v[i])
+        ysh = complex(ss.Line.g1.v[i] + ss.Line.g.v[i] / 2, ss.Line.b1.v[i] + ss.Line.b.v[i] / 2)
+        p = (v1 * np.conj((v1 - v2) * y + v1 * ysh)).real
+        if (best is None or abs(p) > best[1]) and _connected(ss, i):
+            best = (i, abs(p))
+    li = best[0]
+    line = {"andes_idx": ss.Line.idx.v[li], "from_bus": int(ss.Line.bus1.v[li]),
+            "to_bus": int(ss.Line.bus2.v[li]), "kv": float(ss.Line.Vn1.v[li]),
+            "pre_event_flow_mw": round(best[1] * sb, 3)}
+
+    # load step near the largest recorded machine: loads ordered by hop distance from its bus
+    # (then by size), taken until they carry 1/LOAD_STEP_MAX_RISE times the step; all scaled alike
+    ref = machines[0]
+    adj = {b: set() for b in ss.Bus.idx.v}
+    for b1, b2, u in zip(ss.Line.bus1.v, ss.Line.bus2.v, ss.Line.u.v):
+        if u:
+            adj[b1].add(b2)
+            adj[b2].add(b1)
+    hops, frontier = {ref["bus"]: 0}, [ref["bus"]]
+    while frontier:
+        nxt = []
+        for b in frontier:
+            for c in sorted(adj[b]):
+                if c not in hops:
+                    hops[c] = hops[b] + 1
+                    nxt.append(c)
+        frontier = nxt
+    loads = [i for i in range(ss.PQ.n) if ss.PQ.u.v[i] and ss.PQ.p0.v[i] > 0]
+    loads.sort(key=lambda i: (hops[ss.PQ.bus.v[i]], -ss.PQ.p0.v[i], str(ss.PQ.idx.v[i])))
+    step = LOAD_STEP_FRACTION * total_load
+    chosen, acc = [], 0.0
+    for i in loads:
+        chosen.append(i)
+        acc += ss.PQ.p0.v[i]
+        if acc * LOAD_STEP_MAX_RISE >= step:
+            break
+    factor = 1 + step / acc
+    load = {"near_machine": ref["tag"], "factor": factor, "step_mw_at_pf_voltage": step * sb,
+            "total_system_load_mw": total_load * sb,
+            "loads": [{"andes_idx": ss.PQ.idx.v[i], "bus": int(ss.PQ.bus.v[i]),
+                       "hops_from_machine_bus": hops[ss.PQ.bus.v[i]], "p_mw": ss.PQ.p0.v[i] * sb,
+                       "q_mvar": ss.PQ.q0.v[i] * sb} for i in chosen]}
+
+    # generator trip: the unrecorded in-service GENROU whose output is nearest 3 % of the load;
+    # ieee14 records every GENROU, so there the smallest unit is tripped and left out of that file
+    recorded = {m["uid"] for m in machines}
+    pgen = _genrou_p0(ss)
+    pool = [i for i in range(ss.GENROU.n) if ss.GENROU.u.v[i] and i not in recorded]
+    if pool:
+        gi = min(pool, key=lambda i: abs(pgen[i] - GEN_TRIP_FRACTION * total_load))
+    else:
+        gi = min(range(ss.GENROU.n), key=lambda i: pgen[i])
+    gen = {"andes_idx": ss.GENROU.idx.v[gi], "bus": int(ss.GENROU.bus.v[gi]), "id": machine_id(ss, gi),
+           "mbase_mva": float(ss.GENROU.Sn.v[gi]), "p_mw": float(pgen[gi] * sb),
+           "q_mvar": float(_genrou_q0(ss)[gi] * sb), "recorded_elsewhere": gi in recorded}
+    return {"line_trip": line, "load_step": load, "gen_trip": gen}
+
+
+def _genrou_p0(ss):
+    """PF output of each GENROU's static generator [pu system base]."""
+    return np.array([_static_pq(ss, g)[0] for g in ss.GENROU.gen.v])
+
+
+def _genrou_q0(ss):
+    return np.array([_static_pq(ss, g)[1] for g in ss.GENROU.gen.v])
+
+
+def _static_pq(ss, gen_idx):
+    for mdl in (ss.PV, ss.Slack):
+        if gen_idx in mdl.idx.v:
+            k = mdl.idx2uid(gen_idx)
+            return float(mdl.p.v[k]), float(mdl.q.v[k])
+    raise KeyError(gen_idx)
+
+
+def event_models(scenario, ev):
+    """ANDES timed-event devices for a scenario (none for ambient)."""
+    if scenario == "line_trip":
+        return [("Toggle", {"model": "Line", "dev": ev["line_trip"]["andes_idx"], "t": T_EVENT})]
+    if scenario == "gen_trip":
+        return [("Toggle", {"model": "GENROU", "dev": ev["gen_trip"]["andes_idx"], "t": T_EVENT})]
+    if scenario == "load_step":
+        out = []
+        for ld in ev["load_step"]["loads"]:
+            for src in ("Req", "Xeq"):  # constant-impedance load: scale both, P and Q rise alike
+                out.append(("Alter", {"model": "PQ", "dev": ld["andes_idx"], "src": src, "attr": "v",
+                                      "method": "*", "amount": ev["load_step"]["factor"], "t": T_EVENT}))
+        return out
+    return []
+
+
+# ----------------------------------------------------------------------------------------------------
+# simulation
+# ----------------------------------------------------------------------------------------------------
+
+class OULoads:
+    """Independent OU processes xi_i on every load, applied as Req, Xeq = (1 + xi_i) * initial value
+    (P and Q of a load move together). Exact discretisation on the 1/STEP_RATE grid, seeded; a run
+    with a coarser step uses the same path at its own step instants."""
+
+    def __init__(self, ss, sigma, tau, n_steps, seed):
+        rng = np.random.default_rng(seed)
+        n = ss.PQ.n
+        a = np.exp(-1 / (STEP_RATE * tau))
+        xi = np.empty((n_steps + 1, n))
+        xi[0] = 0.0  # start from the power-flow loads; the variance builds up over ~tau
+        noise = sigma * np.sqrt(1 - a * a) * rng.standard_normal((n_steps, n))
+        for k in range(n_steps):
+            xi[k + 1] = a * xi[k] + noise[k]
+        self.xi = xi
+        self.ss = ss
+        self.req0 = None
+
+    def start(self):
+        self.req0 = np.array(self.ss.PQ.Req.v, dtype=float)
+        self.xeq0 = np.array(self.ss.PQ.Xeq.v, dtype=float)
+        self.apply(0)
+
+    def apply(self, k):
+        self.ss.PQ.Req.v[:] = self.req0 * (1 + self.xi[k])
+        self.ss.PQ.Xeq.v[:] = self.xeq0 * (1 + self.xi[k])
+
+    def pert(self, t, system):  # ANDES calls this before solving the step that ends at time t
+        k = float(t) * STEP_RATE
+        if abs(k - round(k)) > 1e-6:
+            raise RuntimeError(f"load update off the OU grid at t={float(t)!r}")
+        self.apply(int(round(k)))
+
+
+REC = ("a", "v", "Pe", "Qe", "delta", "omega", "tm", "te", "Id", "Iq")
+
+
+def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None):
+    """Fixed-step trapezoidal run on the exact grid k/step_rate; returns every step of REC per machine."""
+    tds = ss.TDS
+    cfg = tds.config
+    cfg.tf = t_end + 2.0 / step_rate
+    cfg.tstep = 1.0 / step_rate
+    cfg.fixt, cfg.shrinkt, cfg.tol = 1, 0, TDS_TOL
+    cfg.no_tqdm, cfg.criteria, cfg.save_every = 1, 0, 0
+    tds.init()
+    if not tds.initialized:
+        raise RuntimeError("TDS initialisation failed")
+    # ANDES adds helper breakpoints 1e-4 s before and after each event time; keep only on-grid times
+    keep = [t for t in ss.switch_times if abs(t * step_rate - round(t * step_rate)) < 1e-9]
+    ss.switch_dict = {t: ss.switch_dict[t] for t in keep}
+    ss.switch_times = np.array(keep)
+    ss.n_switches = len(keep)
+
+    gu = np.array([m["uid"] for m in machines], dtype=int)
+    bu = np.array(ss.Bus.idx2uid([m["bus"] for m in machines]), dtype=int)
+    addr = [("y", ss.Bus.a.a[bu]), ("y", ss.Bus.v.a[bu])]
+    addr += [("y", getattr(ss.GENROU, n).a[gu]) for n in ("Pe", "Qe")]
+    addr += [("x", getattr(ss.GENROU, n).a[gu]) for n in ("delta", "omega")]
+    addr += [("y", getattr(ss.GENROU, n).a[gu]) for n in ("tm", "te", "Id", "Iq")]
+    n_steps = int(round(cfg.tf * step_rate))
+    buf = np.full((n_steps + 1, len(REC), len(machines)), np.nan)
+
+    def grab(k):
+        for j, (kind, a) in enumerate(addr):
+            buf[k, j] = (ss.dae.x if kind == "x" else ss.dae.y)[a]
+
+    grab(0)
+    if ou is not None:
+        ou.start()
+        tds.callpert = ou.pert
+
+    def on_step():  # called by ANDES after every converged step, before the event switches
+        k = int(round(float(ss.dae.t) * step_rate))
+        if abs(float(ss.dae.t) * step_rate - k) > 1e-6:
+            raise RuntimeError(f"step left the fixed grid at t={float(ss.dae.t)!r}")
+        ss.dae.t[...] = k / step_rate  # hold the clock exactly on the grid
+        grab(k)
+
+    tds.streaming_step = on_step
+    ok = tds.run(no_summary=True)
+    if not ok or np.isnan(buf).any():
+        raise RuntimeError("time-domain simulation failed or left steps unrecorded")
+    return {name: buf[:, j, :] for j, name in enumerate(REC)}
+
+
+def wrap180(deg):
+    """Wrap degrees to (-180, 180]."""
+    return 180.0 - np.mod(180.0 - deg, 360.0)
+
+
+def frames(sim, f0, sb, machines, fps, t_end, step_rate=STEP_RATE):
+    """PMU frames from the fine-step record: F by the central difference of the bus angle over
+    +-1 step (one-sided at t = 0), phasors and the machine current at the frame instants."""
+    stride = step_rate // fps
+    k = np.arange(0, int(round(t_end * step_rate)) + 1, stride)
+    a = sim["a"]
+    dadt = np.empty_like(a[k])
+    dadt[1:] = (a[k[1:] + 1] - a[k[1:] - 1]) * step_rate / 2
+    dadt[0] = (a[1] - a[0]) * step_rate
+    freq = f0 + dadt / (2 * np.pi)
+    v = sim["v"][k] * np.exp(1j * a[k])
+    s = sim["Pe"][k] + 1j * sim["Qe"][k]
+    cur = np.conj(s / v)
+    mbase = np.array([m["mbase"] for m in machines])
+    # independent check: the machine's own d-q current in the network frame
+    cur_dq = (sim["Id"][k] + 1j * sim["Iq"][k]) * np.exp(1j * (sim["delta"][k] - np.pi / 2))
+    return {"t": k / step_rate, "F": freq, "VM": sim["v"][k], "VA": wrap180(np.degrees(a[k])),
+            "IM": np.abs(cur), "IA": wrap180(np.degrees(np.angle(cur))), "V": v, "I": cur,
+            "Pe": sim["Pe"][k], "I_dq": cur_dq, "delta": sim["delta"][k], "omega": sim["omega"][k],
+            "pm": sim["tm"][k] * sb / mbase, "pe": sim["te"][k] * sb / mbase}
+
+
+# ----------------------------------------------------------------------------------------------------
+# writers
+# ----------------------------------------------------------------------------------------------------
+
+PMU_FMT = {"F": "%.6f", "VM": "%.7f", "VA": "%.5f", "IM": "%.8g", "IA": "%.5f"}
+TRUTH_COLS = (("delta", "delta_rad", "%.7f"), ("omega", "omega_pu", "%.10f"),
+              ("pm", "pm_pu_mbase", "%.8f"), ("pe", "pe_pu_mbase", "%.8f"))
+
+
+def write_csv_gz(path, header, columns, fmts):
+    text = io.StringIO()
+    np.savetxt(text, np.column_stack(columns), fmt=fmts, delimiter=",", header=",".join(header),
+               comments="")
+    with open(path, "wb") as fh, gzip.GzipFile(filename="", mode="wb", fileobj=fh, mtime=0,
+                                               compresslevel=9) as gz:
+        gz.write(text.getvalue().encode())
+
+
+def write_pmu(path, fr, machines, keep):
+    header, cols, fmts = ["time_s"], [fr["t"]], ["%.9f"]
+    for j, m in enumerate(machines):
+        if not keep[j]:
+            continue
+        for q in ("F", "VM", "VA", "IM", "IA"):
+            header.append(f"{m['tag']}/{q}")
+            cols.append(fr[q][:, j])
+            fmts.append(PMU_FMT[q])
+    write_csv_gz(path, header, cols, fmts)
+
+
+def write_truth_csv(path, fr, machines, keep):
+    header, cols, fmts = ["time_s"], [fr["t"]], ["%.9f"]
+    for j, m in enumerate(machines):
+        if not keep[j]:
+            continue
+        for key, name, fmt in TRUTH_COLS:
+            header.append(f"{m['tag']}/{name}")
+            cols.append(fr[key][:, j])
+            fmts.append(fmt)
+    write_csv_gz(path, header, cols, fmts)
+
+
+def _g(x):
+    return f"{float(x):.10g}"
+
+
+def write_raw(ss, path, title):
+    """PSS/E v33 RAW of the simulated network (PF solution as bus voltages, generator PG/QG)."""
+    sb, f0 = ss.config.mva, ss.config.freq
+    ids = gen_ids(ss)
+    mbase_of = {g: (float(ss.GENROU.Sn.vin[i]), float(ss.GENROU.ra.vin[i]), float(ss.GENROU.xd2.vin[i]))
+                for i, g in enumerate(ss.GENROU.gen.v)}
+    if hasattr(ss, "GENCLS"):
+        for i, g in enumerate(ss.GENCLS.gen.v):
+            mbase_of[g] = (float(ss.GENCLS.Sn.vin[i]), float(ss.GENCLS.ra.vin[i]),
+                           float(ss.GENCLS.xd1.vin[i]))
+    slack_buses = set(ss.Slack.bus.v)
+    pv_buses = set(ss.PV.bus.v)
+    out = [f"0, {sb:.2f}, 33, 0, 1, {f0:.2f}     / PSS(R)E 33 RAW, jaxdse andes_bench generate.py",
+           title[:60], "loads: constant power here, constant impedance in ANDES TDS"]
+    for i, b in enumerate(ss.Bus.idx.v):
+        ide = 3 if b in slack_buses else 2 if b in pv_buses else 1
+        out.append(f"{b}, '{str(ss.Bus.name.v[i])[:12]}', {_g(ss.Bus.Vn.v[i])}, {ide}, "
+                   f"{int(ss.Bus.area.v[i] or 1)}, {int(ss.Bus.zone.v[i] or 1)}, 1, "
+                   f"{_g(ss.Bus.v.v[i])}, {_g(np.degrees(ss.Bus.a.v[i]))}, 1.1, 0.9, 1.1, 0.9")
+    out.append("0 / End of Bus data, Begin Load data")
+    count = {}
+    for i in range(ss.PQ.n):
+        b = ss.PQ.bus.v[i]
+        count[b] = count.get(b, 0) + 1
+        out.append(f"{b}, '{count[b]}', {int(ss.PQ.u.v[i])}, 1, 1, {_g(ss.PQ.p0.v[i] * sb)}, "
+                   f"{_g(ss.PQ.q0.v[i] * sb)}, 0, 0, 0, 0, 1, 1, 0")
+    out.append("0 / End of Load data, Begin Fixed shunt data")
+    count = {}
+    if hasattr(ss, "Shunt"):
+        for i in range(ss.Shunt.n):
+            b = ss.Shunt.bus.v[i]
+            count[b] = count.get(b, 0) + 1
+            out.append(f"{b}, '{count[b]}', {int(ss.Shunt.u.v[i])}, {_g(ss.Shunt.g.v[i] * sb)}, "
+                       f"{_g(ss.Shunt.b.v[i] * sb)}")
+    out.append("0 / End of Fixed shunt data, Begin Generator data")
+    gens = []
+    for mdl in (ss.PV, ss.Slack):
+        for i, g in enumerate(mdl.idx.v):
+            gens.append((int(mdl.bus.v[i]), ids[g], mdl, i, g))
+    for b, gid, mdl, i, g in sorted(gens, key=lambda r: (r[0], r[1])):
+        mbase, zr, zx = mbase_of.get(g, (float(mdl.Sn.v[i]), float(mdl.ra.v[i]), float(mdl.xs.v[i])))
+        out.append(f"{b}, '{gid}', {_g(mdl.p.v[i] * sb)}, {_g(mdl.q.v[i] * sb)}, "
+                   f"{_g(mdl.qmax.v[i] * sb)}, {_g(mdl.qmin.v[i] * sb)}, {_g(mdl.v0.v[i])}, 0, "
+                   f"{_g(mbase)}, {_g(zr)}, {_g(zx)}, 0, 0, 1, {int(mdl.u.v[i])}, 100, "
+                   f"{_g(mdl.pmax.v[i] * sb)}, {_g(mdl.pmin.v[i] * sb)}, 1, 1, 0, 1, 0, 1, 0, 1, 0, 1")
+    out.append("0 / End of Generator data, Begin Branch data")
+    is_tf = _branch_kind(ss)
+    ckt = {}
+
+    def circuit(b1, b2):
+        key = (min(b1, b2), max(b1, b2))
+        ckt[key] = ckt.get(key, 0) + 1
+        return ckt[key]
+
+    L = ss.Line
+    for i in range(L.n):
+        if is_tf[i]:
+            continue
+        if L.g.v[i] != 0:
+            raise ValueError("line series-shunt conductance g is not representable; none expected")
+        c = circuit(L.bus1.v[i], L.bus2.v[i])
+        out.append(f"{L.bus1.v[i]}, {L.bus2.v[i]}, '{c}', {_g(L.r.v[i])}, {_g(L.x.v[i])}, {_g(L.b.v[i])}, "
+                   f"0, 0, 0, {_g(L.g1.v[i])}, {_g(L.b1.v[i])}, {_g(L.g2.v[i])}, {_g(L.b2.v[i])}, "
+                   f"{int(L.u.v[i])}, 1, 0, 1, 1, 0, 1, 0, 1, 0, 1")
+    out.append("0 / End of Branch data, Begin Transformer data")
+    for i in range(L.n):
+        if not is_tf[i]:
+            continue
+        if any(getattr(L, n).v[i] != 0 for n in ("b", "g", "b1", "g1", "b2", "g2")):
+            raise ValueError("transformer with shunt admittance; not expected in these cases")
+        c = circuit(L.bus1.v[i], L.bus2.v[i])
+        out.append(f"{L.bus1.v[i]}, {L.bus2.v[i]}, 0, '{c}', 1, 1, 1, 0, 0, 2, '            ', "
+                   f"{int(L.u.v[i])}, 1, 1, 0, 1, 0, 1, 0, 1, '            '")
+        out.append(f"{_g(L.r.v[i])}, {_g(L.x.v[i])}, {_g(sb)}")
+        out.append(f"{_g(L.tap.v[i])}, 0, {_g(np.degrees(L.phi.v[i]))}, 0, 0, 0, 0, 0, 1.1, 0.9, 1.1, 0.9, "
+                   f"33, 0, 0, 0, 0")
+        out.append("1, 0")
+    for name in ("Area interchange", "Two-terminal dc line", "VSC dc line", "Impedance correction table",
+                 "Multi-terminal dc line", "Multi-section line", "Zone", "Inter-area transfer", "Owner",
+                 "FACTS device", "Switched shunt", "GNE device", "Induction machine"):
+        out.append(f"0 / End of {name} data")
+    out.append("Q")
+    path.write_text("\n".join(out) + "\n")
+
+
+def dyn_params(mdl, i, names):
+    vals = {}
+    for n in names:
+        if n == "H":
+            vals[n] = float(mdl.M.vin[i]) / 2
+        elif not hasattr(mdl, n):  # PSS/E CON that ANDES does not model (IEEEX1 Switch): unused, 0
+            vals[n] = 0.0
+        else:
+            vals[n] = float(getattr(mdl, n).vin[i])
+    return vals
+
+
+def _icons(ss, mdl, i, icon_names):
+    out = []
+    for n in icon_names:
+        if n == "syn2_bus":
+            s2 = mdl.syn2.v[i]
+            out.append(0 if s2 in (None, "None") else int(ss.GENROU.bus.v[ss.GENROU.idx2uid(s2)]))
+        elif n == "syn2_id":
+            s2 = mdl.syn2.v[i]
+            out.append(0 if s2 in (None, "None") else int(machine_id(ss, ss.GENROU.idx2uid(s2))))
+        elif n.startswith("busr"):
+            b = getattr(mdl, n).v[i]
+            out.append(0 if b in (None, "None") else int(b))
+        else:
+            out.append(int(getattr(mdl, n).v[i]))
+    return out
+
+
+def controls_of(ss, syn_idx):
+    """(governor, exciter, pss) as (model name, uid) or None for one synchronous machine."""
+    gov = _group_links(ss, "TurbineGov", "syn").get(syn_idx)
+    exc = _group_links(ss, "Exciter", "syn").get(syn_idx)
+    pss = _group_links(ss, "PSS", "avr").get(exc[1]) if exc else None
+    return [None if c is None else (c[0], ss.models[c[0]].idx2uid(c[1])) for c in (gov, exc, pss)]
+
+
+def write_dyr(ss, path):
+    """GENROU/GENCLS, governor, exciter and stabilizer records of every in-service machine."""
+    lines = []
+    machines = []
+    for model in ("GENROU", "GENCLS"):
+        mdl = ss.models.get(model)
+        if mdl is None:
+            continue
+        for i in range(mdl.n):
+            if mdl.u.v[i]:
+                gid = gen_ids(ss)[mdl.gen.v[i]]
+                machines.append((int(mdl.bus.v[i]), gid, model, i))
+    for bus, gid, model, i in sorted(machines, key=lambda r: (r[0], r[1])):
+        mdl = ss.models[model]
+        recs = [(model, i)] + [c for c in controls_of(ss, mdl.idx.v[i]) if c is not None]
+        for name, j in recs:
+            icon_names, con_names = DYR[name]
+            m = ss.models[name]
+            if name in ("TGOV1", "IEEEG1") and float(m.Tn.vin[j]) not in (0.0, float(mdl.Sn.vin[i])):
+                raise ValueError("governor rating differs from MBASE; not expected")
+            vals = [str(v) for v in _icons(ss, m, j, icon_names)]
+            cons = dyn_params(m, j, con_names)
+            vals += [_g(cons[n]) for n in con_names]
+            body = [" ".join(vals[k:k + 6]) for k in range(0, len(vals), 6)]
+            lines.append(f"{bus} '{name}' {gid} " + ("\n    ".join(body)) + " /")
+    path.write_text("\n".join(lines) + "\n")
+
+
+# ----------------------------------------------------------------------------------------------------
+# truth, checks, verification
+# ----------------------------------------------------------------------------------------------------
+
+def machine_truth(ss, m):
+    i = m["uid"]
+    f0 = float(ss.GENROU.fn.v[i])
+    h = float(ss.GENROU.M.vin[i]) / 2
+    d = float(ss.GENROU.D.vin[i])
+    gov, exc, pss = controls_of(ss, ss.GENROU.idx.v[i])
+    out = {"tag": m["tag"], "andes_idx": ss.GENROU.idx.v[i], "bus": m["bus"], "id": m["id"],
+           "bus_kv": float(ss.Bus.Vn.v[ss.Bus.idx2uid(m["bus"])]), "mbase_mva": m["mbase"],
+           "H_s_mbase": h, "M_2H_s_mbase": 2 * h,
+           "D_andes_pu_torque_per_pu_speed_mbase": d,
+           "D_pu_torque_per_rad_s_electrical": d / (2 * np.pi * f0),
+           "genrou_mbase": {n: float(getattr(ss.GENROU, n).vin[i]) for n in GENROU_PARAMS}}
+    for key, c in (("governor", gov), ("exciter", exc), ("pss", pss)):
+        if c is None:
+            out[key] = None
+            continue
+        name, j = c
+        mdl = ss.models[name]
+        icon_names, con_names = DYR[name]
+        out[key] = {"model": name, "andes_idx": mdl.idx.v[j], "meaning": MEANING.get(name, ""),
+                    "icons": dict(zip(icon_names, _icons(ss, mdl, j, icon_names))),
+                    "params_mbase_psse_order": dyn_params(mdl, j, con_names),
+                    "added_by_bench": str(mdl.idx.v[j]).startswith("added_")}
+    return out
+
+
+def read_csv_gz(path):
+    with gzip.open(path, "rt") as fh:
+        header = fh.readline().strip().split(",")
+        arr = np.loadtxt(fh, delimiter=",")
+    return header, arr
+
+
+def check_consistency(path, fr, machines, keep):
+    """Re(V I*) from the written file vs ANDES Pe; |I_file - I_dq| (the machine's own d-q current)."""
+    header, arr = read_csv_gz(path)
+    col = {h: k for k, h in enumerate(header)}
+    worst_p, worst_i = 0.0, 0.0
+    for j, m in enumerate(machines):
+        if not keep[j]:
+            continue
+        t = m["tag"]
+        v = arr[:, col[f"{t}/VM"]] * np.exp(1j * np.radians(arr[:, col[f"{t}/VA"]]))
+        cur = arr[:, col[f"{t}/IM"]] * np.exp(1j * np.radians(arr[:, col[f"{t}/IA"]]))
+        worst_p = max(worst_p, float(np.max(np.abs((v * np.conj(cur)).real - fr["Pe"][:, j]))))
+        worst_i = max(worst_i, float(np.max(np.abs(fr["I"][:, j] - fr["I_dq"][:, j]))))
+    return {"max_abs_ReVIconj_minus_andes_Pe_pu_sys": worst_p,
+            "max_abs_I_from_PQ_minus_I_from_dq_pu_sys": worst_i}
+
+
+def swing_fit(path, machines, keep, f0, exclude=(T_EVENT - 0.1, T_EVENT + 0.5)):
+    """Least squares of d omega/dt (central difference) on (pm - pe), (omega - 1) and a constant."""
+    header, arr = read_csv_gz(path)
+    col = {h: k for k, h in enumerate(header)}
+    t = arr[:, 0]
+    dt = t[1] - t[0]
+    out = {}
+    for j, m in enumerate(machines):
+        if not keep[j]:
+            continue
+        tag = m["tag"]
+        w = arr[:, col[f"{tag}/omega_pu"]]
+        acc = arr[:, col[f"{tag}/pm_pu_mbase"]] - arr[:, col[f"{tag}/pe_pu_mbase"]]
+        dw = (w[2:] - w[:-2]) / (2 * dt)
+        tt = t[1:-1]
+        sel = (tt < exclude[0]) | (tt > exclude[1])
+        a = np.column_stack([acc[1:-1], w[1:-1] - 1, np.ones_like(tt)])[sel]
+        coef, *_ = np.linalg.lstsq(a, dw[sel], rcond=None)
+        m_fit = 1 / coef[0]
+        out[tag] = {"M_fit_s": m_fit, "M_true_s": 2 * m["H"], "rel_err": m_fit / (2 * m["H"]) - 1,
+                    "D_fit_pu": -coef[1] * m_fit, "D_true_pu": m["D"]}
+    return out
+
+
+def stats(fr, machines, keep, f0):
+    out = {}
+    for j, m in enumerate(machines):
+        if not keep[j]:
+            continue
+        dev = (fr["omega"][:, j] - 1) * f0 * 1e3
+        fdev = (fr["F"][:, j] - f0) * 1e3
+        out[m["tag"]] = {"speed_dev_std_mHz": float(np.std(dev)), "speed_dev_min_mHz": float(dev.min()),
+                         "speed_dev_max_mHz": float(dev.max()), "bus_freq_dev_std_mHz": float(np.std(fdev)),
+                         "bus_freq_dev_min_mHz": float(fdev.min()), "bus_freq_dev_max_mHz": float(fdev.max())}
+    return out
+
+
+def verify_psse(case, ss, machines, raw, dyr, line_ev):
+    """Reload the written .raw/.dyr with ANDES: PF, dynamic data and a 15 s line-trip run must match."""
+    new = andes.load(str(raw), addfile=str(dyr), setup=False, no_output=True, default_config=True)
+    new.add("Toggle", {"model": "Line", "dev": _line_idx_by_buses(new, line_ev), "t": T_EVENT})
+    new.setup()
+    new.PFlow.run()
+    d_v = float(np.max(np.abs(np.asarray(new.Bus.v.v) - np.asarray(ss.Bus.v.v))))
+    d_a = float(np.max(np.abs(np.asarray(new.Bus.a.v) - np.asarray(ss.Bus.a.v))))
+    worst_par = 0.0
+    for model in ("GENROU", "GENCLS", "TGOV1", "IEEEG1", "IEEEX1", "ESDC2A", "EXST1", "ESST3A", "SEXS",
+                  "IEEEST", "ST2CUT"):
+        a, b = ss.models.get(model), new.models.get(model)
+        if a is None or a.n == 0:
+            continue
+        if b.n != a.n:
+            raise AssertionError(f"{model}: {a.n} devices simulated, {b.n} read back")
+        syn = "syn" if hasattr(a, "syn") else "avr" if hasattr(a, "avr") else None
+        key_a = _device_keys(ss, a, syn)
+        key_b = _device_keys(new, b, syn)
+        order = [key_b.index(k) for k in key_a]
+        for n, p in a.params.items():
+            if type(p).__name__ != "NumParam" or n in ("u", "Tn", "coi", "coi2"):
+                continue
+            va = np.asarray(p.vin, dtype=float)
+            vb = np.asarray(b.params[n].vin, dtype=float)[order]
+            worst_par = max(worst_par, float(np.max(np.abs(va - vb) / np.maximum(1, np.abs(va)))))
+    # short line trip on both
+    t_end = 15.0
+    ref = load_case(case, event_models("line_trip", {"line_trip": line_ev}))
+    mach_ref = [dict(m, uid=ref.GENROU.idx2uid(m["andes_idx"])) for m in machines]
+    s_ref = simulate(ref, mach_ref, t_end)
+    mach_new = []
+    for m in machines:
+        k = next(i for i in range(new.GENROU.n) if int(new.GENROU.bus.v[i]) == m["bus"]
+                 and machine_id(new, i) == m["id"])
+        mach_new.append(dict(m, uid=k))
+    s_new = simulate(new, mach_new, t_end)
+    d_w = float(np.max(np.abs(s_ref["omega"] - s_new["omega"])))
+    d_p = float(np.max(np.abs(s_ref["Pe"] - s_new["Pe"])))
+    return {"pf_max_abs_dV_pu": d_v, "pf_max_abs_dangle_rad": d_a, "dyn_param_max_rel_diff": worst_par,
+            "line_trip_15s_max_abs_domega_pu": d_w, "line_trip_15s_max_abs_dPe_pu_sys": d_p}
+
+
+def _line_idx_by_buses(ss, ev):
+    for i in range(ss.Line.n):
+        if {int(ss.Line.bus1.v[i]), int(ss.Line.bus2.v[i])} == {ev["from_bus"], ev["to_bus"]}:
+            return ss.Line.idx.v[i]
+    raise KeyError(ev)
+
+
+def _device_keys(ss, mdl, link):
+    """(bus, machine id) of the machine behind each device, to pair devices across two loads."""
+    keys = []
+    for i in range(mdl.n):
+        if link is None:
+            keys.append((int(mdl.bus.v[i]), machine_id_any(ss, mdl.gen.v[i])))
+            continue
+        dev = getattr(mdl, link).v[i]
+        if link == "avr":
+            grp = ss.models[_model_of(ss, "Exciter", dev)]
+            dev = grp.syn.v[grp.idx2uid(dev)]
+        syn_model = ss.models[_model_of(ss, "SynGen", dev)]
+        k = syn_model.idx2uid(dev)
+        keys.append((int(syn_model.bus.v[k]), machine_id_any(ss, syn_model.gen.v[k])))
+    return keys
+
+
+def _model_of(ss, group, idx):
+    for name, mdl in ss.groups[group].models.items():
+        if idx in mdl.idx.v:
+            return name
+    raise KeyError(idx)
+
+
+def machine_id_any(ss, gen_idx):
+    return gen_ids(ss)[gen_idx]
+
+
+# ----------------------------------------------------------------------------------------------------
+# driver
+# ----------------------------------------------------------------------------------------------------
+
+def save_truth(path, top, scenario_entries):
+    """Merge into truth.json (several runs of one case, e.g. events and ambient, may write it)."""
+    cur = json.loads(path.read_text()) if path.exists() else {}
+    for key, val in top.items():  # psse_files: a run without the round trip keeps the last one
+        cur[key] = {**cur[key], **val} if key == "psse_files" and key in cur else val
+    cur.setdefault("scenarios", {}).update(scenario_entries)
+    cur["scenarios"] = {k: cur["scenarios"][k] for k in SCENARIOS if k in cur["scenarios"]}
+    path.write_text(json.dumps(cur, indent=1, default=float) + "\n")
+
+
+def run_case(case, scenarios, verify, step_check):
+    t_start = time.time()
+    out_dir = DATA / case
+    out_dir.mkdir(parents=True, exist_ok=True)
+    base = load_case(case)
+    sb, f0 = float(base.config.mva), float(base.config.freq)
+    machines = []
+    for i in select_machines(base, case):
+        bus, gid = int(base.GENROU.bus.v[i]), machine_id(base, i)
+        machines.append({"uid": i, "andes_idx": base.GENROU.idx.v[i], "bus": bus, "id": gid,
+                         "tag": f"B{bus}_G{gid}", "mbase": float(base.GENROU.Sn.vin[i]),
+                         "H": float(base.GENROU.M.vin[i]) / 2, "D": float(base.GENROU.D.vin[i])})
+    events = choose_events(base, case, machines)
+    log.info("%s: recording %s", case, [m["tag"] for m in machines])
+    truth_path = out_dir / "truth.json"
+    truth = {}
+    truth.update({
+        "generator": "experiments/andes_bench/generate.py",
+        "andes_version": andes.__version__,
+        "case": case, "andes_case_files": list(CASES[case]["files"]),
+        "system_base_mva": sb, "f0_hz": f0,
+        "integration": {"method": "ANDES implicit trapezoid, fixed step", "step_s_events": 1 / STEP_RATE,
+                        "step_s_ambient": 1 / AMBIENT_STEP_RATE, "newton_tol": TDS_TOL},
+        "load_model_in_dynamics": "ANDES default: every PQ load becomes a constant impedance at t=0 "
+                                  "(p2z = q2z = 1); the .raw holds them as constant-power PL/QL",
+        "added_to_case": [{"machine": g, "model": mname,
+                           "params": (ADDED_EXCITER if mname == ADDED_EXCITER[0] else ADDED_GOVERNOR)[1]}
+                          for g, mname in base.bench_added],
+        "selection_rule": "all in-service GENROU" if CASES[case]["n_record"] is None else
+        f"the {CASES[case]['n_record']} largest MBASE among in-service GENROU that the shipped case "
+        "equips with a governor and an exciter (ties: lower bus number)",
+        "conventions": {
+            "F": "bus frequency [Hz] = f0 + (d theta/dt)/(2 pi), theta = ANDES bus angle in the frame "
+                 "rotating at f0, central difference over +-1 integration step around the frame "
+                 "(forward difference at t=0)",
+            "VM": "terminal bus voltage magnitude [pu of bus base kV]",
+            "VA": "terminal bus voltage angle [deg] wrapped to (-180, 180], same frame as F",
+            "IM_IA": "machine output current I = conj((Pe + jQe)/V) [pu on the system base at the bus "
+                     "base kV; deg wrapped]; direction out of the machine into the network",
+            "delta_rad": "ANDES rotor angle: q axis angle in the same frame as VA (unwrapped), "
+                         "V e^{j theta} = (vd + j vq) e^{j(delta - pi/2)}",
+            "omega_pu": "rotor speed [pu of f0]",
+            "pm_pu_mbase": "ANDES mechanical torque tm on the machine base",
+            "pe_pu_mbase": "ANDES air-gap torque te on the machine base (= Pe + ra |I|^2; ra = 0 here)",
+            "swing_equation": "2H d(omega)/dt = tm - te - D (omega - 1), torques and D on the machine "
+                              "base, omega in pu, t in s (ANDES GENROU; no 1/omega factor)",
+            "event_frame": "the frame at t = 10 s holds the pre-event state; the event acts from the "
+                           "next integration step on",
+        },
+        "machines": [machine_truth(base, m) for m in machines],
+    })
+    timing = {}
+    for sc in scenarios:
+        t0 = time.time()
+        fps = FPS[sc]
+        if sc == "ambient":
+            ss = load_case(case)
+            n_steps = int(round((T_AMBIENT + 2.0 / AMBIENT_STEP_RATE) * STEP_RATE))
+            ou = OULoads(ss, CASES[case]["ou_sigma"], OU_TAU_S, n_steps, CASES[case]["seed"])
+            t_end, desc = T_AMBIENT, {
+                "description": "no event; every load's P and Q follow (1 + xi_i(t)) times the initial "
+                               "value, xi_i independent Ornstein-Uhlenbeck processes",
+                "ou_std": CASES[case]["ou_sigma"], "ou_time_constant_s": OU_TAU_S,
+                "ou_update": "exact discretisation at every integration step", "seed": CASES[case]["seed"],
+                "n_loads": int(ss.PQ.n)}
+        else:
+            ss = load_case(case, event_models(sc, events))
+            ou, t_end = None, T_EVENT_RUN
+            desc = {"event_time_s": T_EVENT, **events[sc]}
+        mach = [dict(m, uid=ss.GENROU.idx2uid(m["andes_idx"])) for m in machines]
+        rate = AMBIENT_STEP_RATE if sc == "ambient" else STEP_RATE
+        sim = simulate(ss, mach, t_end, step_rate=rate, ou=ou)
+        fr = frames(sim, f0, sb, mach, fps, t_end, step_rate=rate)
+        keep = [not (sc == "gen_trip" and m["andes_idx"] == events["gen_trip"]["andes_idx"])
+                for m in machines]
+        pmu_path = out_dir / f"{sc}.csv.gz"
+        write_pmu(pmu_path, fr, mach, keep)
+        entry = dict(desc, fps=fps, duration_s=t_end, file=pmu_path.name, integration_step_s=1 / rate,
+                     recorded=[m["tag"] for m, k in zip(machines, keep) if k],
+                     initial_pq_pu_mbase={m["tag"]: [float(fr["Pe"][0, j] * sb / m["mbase"]),
+                                                     float(np.imag(fr["V"][0, j] * np.conj(fr["I"][0, j]))
+                                                           * sb / m["mbase"])]
+                                          for j, m in enumerate(machines) if keep[j]},
+                     stats=stats(fr, mach, keep, f0),
+                     checks=check_consistency(pmu_path, fr, mach, keep))
+        if sc == "ambient" and step_check:  # first 60 s again at h = 1/240 s on the same OU path
+            ss2 = load_case(case)
+            ou2 = OULoads(ss2, CASES[case]["ou_sigma"], OU_TAU_S, n_steps, CASES[case]["seed"])
+            mach2 = [dict(m, uid=ss2.GENROU.idx2uid(m["andes_idx"])) for m in machines]
+            sim2 = simulate(ss2, mach2, 60.0, step_rate=STEP_RATE, ou=ou2)
+            fr2 = frames(sim2, f0, sb, mach2, fps, 60.0, step_rate=STEP_RATE)
+            n = len(fr2["t"])
+            entry["checks"]["half_step_first_60s"] = {
+                "max_abs_domega_pu": float(np.max(np.abs(fr2["omega"] - fr["omega"][:n]))),
+                "max_abs_dF_Hz": float(np.max(np.abs(fr2["F"] - fr["F"][:n]))),
+                "max_abs_dVM_pu": float(np.max(np.abs(fr2["VM"] - fr["VM"][:n]))),
+                "max_abs_dI_pu_sys": float(np.max(np.abs(fr2["I"] - fr["I"][:n])))}
+        if sc != "ambient":
+            tpath = out_dir / f"{sc}_truth.csv.gz"
+            write_truth_csv(tpath, fr, mach, keep)
+            entry["truth_file"] = tpath.name
+            entry["checks"]["swing_fit"] = swing_fit(tpath, mach, keep, f0)
+            if step_check:
+                ss2 = load_case(case, event_models(sc, events))
+                mach2 = [dict(m, uid=ss2.GENROU.idx2uid(m["andes_idx"])) for m in machines]
+                sim2 = simulate(ss2, mach2, t_end, step_rate=2 * STEP_RATE)
+                fr2 = frames(sim2, f0, sb, mach2, fps, t_end, step_rate=2 * STEP_RATE)
+                entry["checks"]["half_step"] = {
+                    "max_abs_domega_pu": float(np.max(np.abs(fr2["omega"] - fr["omega"]))),
+                    "max_abs_dF_Hz_excluding_event_frame": float(np.max(np.abs(
+                        (fr2["F"] - fr["F"])[np.abs(fr["t"] - T_EVENT) > 1e-9]))),
+                    "max_abs_dVM_pu": float(np.max(np.abs(fr2["VM"] - fr["VM"]))),
+                    "max_abs_dI_pu_sys": float(np.max(np.abs(fr2["I"] - fr["I"])))}
+        timing[sc] = time.time() - t0
+        entry["runtime_s"] = round(timing[sc], 1)
+        log.info("%s %s done in %.0f s", case, sc, timing[sc])
+        save_truth(truth_path, truth, {sc: entry})
+
+    raw, dyr = out_dir / f"{case}.raw", out_dir / f"{case}.dyr"
+    write_raw(base, raw, f"ANDES {andes.__version__} {CASES[case]['files'][0]} as simulated")
+    write_dyr(base, dyr)
+    truth["psse_files"] = {"raw": raw.name, "dyr": dyr.name,
+                           "transformer_codes": "CW=1 (WINDV1 = ANDES tap in pu of bus kV, WINDV2 = 1), "
+                                                "CZ=1 (R, X on system base), CM=1 (MAG1 = MAG2 = 0)",
+                           "zsorce": "ZR = ra, ZX = X''d (GENROU) or X'd (GENCLS), machine base"}
+    if verify:
+        truth["psse_files"]["roundtrip"] = verify_psse(case, base, machines, raw, dyr, events["line_trip"])
+    save_truth(truth_path, truth, {})
+    log.info("%s finished in %.0f s", case, time.time() - t_start)
+
+
+def _event_text(sc, e):
+    if sc == "line_trip":
+        return (f"trip line {e['from_bus']}-{e['to_bus']} ({e['kv']:g} kV, {e['pre_event_flow_mw']:.0f} MW "
+                f"before) at {e['event_time_s']:g} s")
+    if sc == "load_step":
+        buses = ", ".join(str(ld["bus"]) for ld in e["loads"])
+        return (f"loads at bus {buses} x{e['factor']:.4f} (+{e['step_mw_at_pf_voltage']:.1f} MW = 5 % of "
+                f"{e['total_system_load_mw']:.0f} MW) at {e['event_time_s']:g} s, near {e['near_machine']}")
+    if sc == "gen_trip":
+        note = " (recorded in the other files; left out of this one)" if e["recorded_elsewhere"] else ""
+        return (f"trip GENROU at bus {e['bus']} id {e['id']} ({e['mbase_mva']:g} MVA, {e['p_mw']:.0f} MW)"
+                f"{note} at {e['event_time_s']:g} s")
+    return (f"no event; OU load noise std {e['ou_std']:g} (relative), tau {e['ou_time_constant_s']:g} s, "
+            f"seed {e['seed']}")
+
+
+def write_manifest():
+    """data/MANIFEST.md from the truth.json files and the sizes on disk."""
+    rows = ["# ANDES bench data", "",
+            "Written by `experiments/andes_bench/generate.py` (ANDES, GPL-3, run in its own venv; only "
+            "that script imports it). All recordings are noise-free.", "",
+            "Conventions: `time_s` from 0; per machine tag `B<bus>_G<id>`: `F` bus frequency [Hz] "
+            "(central difference of the bus-voltage angle over +-1/240 s), `VM` [pu of bus kV], `VA` "
+            "[deg, (-180, 180]], `IM` [pu on the 100 MVA system base at the bus kV], `IA` [deg]; current "
+            "= conj((Pe + jQe)/V) of the machine itself, flowing out of the machine (generator "
+            "convention). Events at 60 frames/s, 70 s, event at t = 10 s (the t = 10 s frame is "
+            "pre-event, its F straddles the switching); ambient at 30 frames/s, 600 s. Truth files: "
+            "`delta_rad` (ANDES rotor angle, same frame as VA, unwrapped), `omega_pu`, `pm_pu_mbase` "
+            "(mechanical torque), `pe_pu_mbase` (air-gap torque; ra = 0 so = terminal P), machine base. "
+            "Swing equation: 2H d(omega)/dt = pm - pe - D (omega - 1). Integration: implicit trapezoid, "
+            "h = 1/240 s. Loads are constant impedances in the dynamics. H, D, machine, governor, "
+            "exciter and PSS data: `truth.json`; the simulated network: `<case>.raw` (PSS/E v33) and "
+            "`<case>.dyr`.", ""]
+    total = 0
+    for case in CASES:
+        tp = DATA / case / "truth.json"
+        if not tp.exists():
+            continue
+        t = json.loads(tp.read_text())
+        rows += [f"## {case}", "", f"Case files: {', '.join(t['andes_case_files'])} (ANDES "
+                 f"{t['andes_version']}); recorded: {t['selection_rule']}.", ""]
+        if t["added_to_case"]:
+            added = ", ".join(f"{a['model']} on {a['machine']}" for a in t["added_to_case"])
+            rows += [f"Added to the case: {added} (data in truth.json).", ""]
+        rows += ["| tag | MBASE [MVA] | H [s] | D [pu] | governor | exciter | PSS |",
+                 "|---|---|---|---|---|---|---|"]
+        for m in t["machines"]:
+            ctl = [m[k]["model"] if m[k] else "-" for k in ("governor", "exciter", "pss")]
+            rows.append(f"| {m['tag']} | {m['mbase_mva']:g} | {m['H_s_mbase']:g} | "
+                        f"{m['D_andes_pu_torque_per_pu_speed_mbase']:g} | {' | '.join(ctl)} |")
+        rows += ["", "| file | frames/s | s | scenario | size [kB] |", "|---|---|---|---|---|"]
+        for f in sorted((DATA / case).iterdir()):
+            size = f.stat().st_size
+            total += size
+            sc = f.name.split(".")[0].replace("_truth", "")
+            e = t["scenarios"].get(sc)
+            what = ("truth: " if "_truth" in f.name else "") + (_event_text(sc, e) if e else "")
+            fps = e["fps"] if e else ""
+            dur = f"{e['duration_s']:g}" if e else ""
+            rows.append(f"| {case}/{f.name} | {fps} | {dur} | {what} | {size / 1e3:.0f} |")
+        rows.append("")
+    rows += [f"Total of data/: {total / 1e6:.2f} MB (plus this file and generate.py).", ""]
+    (DATA / "MANIFEST.md").write_text("\n".join(rows))
+
+
+def setup_logging():
+    andes.config_logger(stream_level=logging.ERROR)
+    handler = logging.StreamHandler()
+    handler.setFormatter(logging.Formatter("%(asctime)s %(message)s"))
+    log.addHandler(handler)
+    log.setLevel(logging.INFO)
+    log.propagate = False
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--case", nargs="+", choices=tuple(CASES), default=list(CASES))
+    ap.add_argument("--scenario", nargs="*", choices=SCENARIOS, default=list(SCENARIOS),
+                    help="scenarios to simulate; give none to rewrite only the .raw/.dyr (and verify)")
+    ap.add_argument("--no-verify", action="store_true", help="skip the .raw/.dyr round trip")
+    ap.add_argument("--step-check", action="store_true", help="rerun events at half the step")
+    args = ap.parse_args()
+    setup_logging()
+    for case in args.case:
+        run_case(case, args.scenario, not args.no_verify, args.step_check)
+    write_manifest()
+
+
+if __name__ == "__main__":
+    main()

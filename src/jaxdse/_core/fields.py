@@ -1,0 +1,36 @@
+"""Helpers for ``eqx.Module`` parameter fields: array conversion and validation at the edge."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+
+def as_float(x):
+    """Converter for ``eqx.field``: a JAX float array leaf (float64 when x64 is enabled)."""
+    return jnp.asarray(x, dtype=float)
+
+
+def concrete(value) -> bool:
+    """True for a value known now (not a tracer inside jit/vmap/grad): only those are validated."""
+    return not isinstance(value, jax.core.Tracer)
+
+
+def check_positive(module, *names: str) -> None:
+    """Raise ``ValueError`` for a concrete field that is not strictly positive.
+
+    Traced values (inside jit/vmap/grad) are not checked: validation happens at the edge.
+    """
+    for name in names:
+        value = getattr(module, name)
+        if concrete(value) and np.any(~(np.asarray(value) > 0)):
+            raise ValueError(f"{type(module).__name__}.{name} must be > 0, got {value}")
+
+
+def check_nonnegative(module, *names: str) -> None:
+    """Like :func:`check_positive` but admits zero."""
+    for name in names:
+        value = getattr(module, name)
+        if concrete(value) and np.any(~(np.asarray(value) >= 0)):
+            raise ValueError(f"{type(module).__name__}.{name} must be >= 0, got {value}")

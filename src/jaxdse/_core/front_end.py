@@ -1,0 +1,126 @@
+"""The front end: every configuration-independent, per-sample stage before the observer.
+
+recording -> mapping to the terminal (paper Eqs. 8-13) -> algebraic observer (Lemma 1) ->
+measured speed deviation (Remark 2) -> torque reference T_ref (Sec. IV-A) and the inputs of
+the event playback. Also the sums over samples that the flags need.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from .algebraic import AlgebraicStates, algebraic_observer
+from .governor import AbstractGovernor
+from .mapping import map_to_terminal
+from .plant import Plant
+from .playback import PlaybackInputs, estimate_field_voltage
+from .recording import Recording
+from .settings import Settings
+from .signals import frequency_from_angle, measured_speed_deviation, unwrap_continuing
+
+
+class StreamContext(NamedTuple):
+    """What a chunk of a stream needs from the samples before it (see ``_many.stream``)."""
+
+    p_lv_sum: Array
+    """Sum of P_LV over all samples before the chunk (running mean of the auxiliary load)."""
+    p_lv_count: Array
+    theta_ref0: Array
+    """Unwrapped voltage angle at the chunk's first sample, as the previous chunk had it."""
+    rel0: Array
+    """Unwrapped delta - theta_ref at the first sample."""
+    theta_t0: Array
+    """Unwrapped terminal-voltage angle at the first sample."""
+
+
+class FrontEnd(NamedTuple):
+    """The configuration-independent, per-sample part of the pipeline."""
+
+    n: Array
+    """Valid samples."""
+    valid: Array
+    theta_ref: Array
+    """Unwrapped measured voltage angle: the frame of every phasor below [rad]."""
+    theta_t: Array
+    """Terminal voltage angle in the nominal frame [rad]."""
+    v_t: Array
+    """Terminal voltage in the theta_ref frame [pu, machine base = system base voltage]."""
+    i_t: Array
+    """Terminal current in the theta_ref frame [pu, machine base]."""
+    p_lv: Array
+    alg: AlgebraicStates
+    x2_meas: Array
+    """Measured speed deviation [rad/s] (paper Remark 2)."""
+    dw: Array
+    """x2_meas / w_s [pu], the governor input."""
+
+
+def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(),
+              context: StreamContext | None = None) -> FrontEnd:
+    """Mapping to the terminal, algebraic observer and measured speed, for every sample."""
+    m = plant.machine
+    ts = recording.t_s
+    dt = ts[1] - ts[0]
+    hw = settings.derivative_half_width
+    n = ts.shape[0] if recording.n_samples is None else recording.n_samples
+    ctx = context or StreamContext(0.0, 0, None, None, None)
+
+    # Work in the frame of the measured voltage angle: no large angle ever enters arg().
+    theta_ref = unwrap_continuing(recording.v_ang_rad, ctx.theta_ref0)
+    v_meas = recording.v_mag_pu + 0j
+    # Materialised once (a barrier): XLA would otherwise recompute its sin and cos in each of
+    # the fused loops of the mapping below.
+    i_meas = jax.lax.optimization_barrier(
+        recording.i_mag_pu * jnp.exp(1j * (recording.i_ang_rad - theta_ref)))
+    mapped = map_to_terminal(v_meas, i_meas, plant.line, plant.transformer, plant.aux,
+                             recording.location, ctx.p_lv_sum, ctx.p_lv_count)
+    i_t = mapped.i_sg * plant.current_scale
+    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0)
+    f_hz = recording.f_hz
+    if f_hz is None:
+        f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
+    x2_meas = measured_speed_deviation(f_hz, alg.delta_rad, theta_ref, dt, m.f_nominal_hz, hw, n)
+    theta_t = theta_ref + unwrap_continuing(jnp.angle(mapped.v_t), None if context is None
+                                            else ctx.theta_t0 - theta_ref[0])
+    return FrontEnd(n=n, valid=jnp.arange(ts.shape[0]) < n, theta_ref=theta_ref, theta_t=theta_t,
+                    v_t=mapped.v_t, i_t=i_t, p_lv=mapped.p_lv, alg=alg, x2_meas=x2_meas,
+                    dw=x2_meas / m.omega_s)
+
+
+def reference_torque(ts, fe: FrontEnd, gov: AbstractGovernor, settings: Settings):
+    """T_ref from the quasi-steady state of the first ``qss_window_s`` (paper Sec. IV-A)."""
+    qss = (ts < ts[0] + settings.qss_window_s) & fe.valid
+    ref = gov.reference_from_steady(fe.alg.t_e_pu, fe.dw)
+    return jnp.sum(jnp.where(qss, ref, 0.0)) / jnp.maximum(jnp.sum(qss), 1)
+
+
+def playback_inputs(fe: FrontEnd, t_m, delta0, t_ref, plant: Plant, settings: Settings, dt):
+    """Inputs, initial state and measured outputs (x2, I_t, P_t, Q_t) of the event playback."""
+    m = plant.machine
+    e_f = estimate_field_voltage(fe.alg.e_q1_pu, fe.alg.i_d_pu, dt, m,
+                                 settings.derivative_half_width, fe.n)
+    inputs = PlaybackInputs(jnp.abs(fe.v_t), fe.theta_t - delta0, e_f, t_m, fe.dw)
+    y0 = jnp.stack([0.0 * delta0, fe.x2_meas[0], fe.alg.e_q1_pu[0]])
+    if not settings.external_tm:
+        y0 = jnp.concatenate([y0, plant.governor.steady_state(t_ref, fe.dw[0])])
+    s_t = fe.v_t * jnp.conj(fe.i_t)
+    return inputs, y0, (fe.x2_meas, jnp.abs(fe.i_t), jnp.real(s_t), jnp.imag(s_t))
+
+
+class FrontSums(NamedTuple):
+    """Sums over the valid samples that the flags need (added up chunk by chunk in a stream)."""
+
+    i_mag: Array
+    t_e: Array
+    count: Array
+
+
+def front_sums(fe: FrontEnd, start: int = 0, stop: int | None = None) -> FrontSums:
+    """Sums over samples ``start:stop`` (a chunk without its halo)."""
+    sel = fe.valid[start:stop]
+    return FrontSums(jnp.sum(jnp.where(sel, jnp.abs(fe.i_t[start:stop]), 0.0)),
+                     jnp.sum(jnp.where(sel, fe.alg.t_e_pu[start:stop], 0.0)), jnp.sum(sel))
