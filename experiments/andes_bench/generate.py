@@ -414,6 +414,7 @@ def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None):
         if abs(float(ss.dae.t) * step_rate - k) > 1e-6:
             raise RuntimeError(f"step left the fixed grid at t={float(ss.dae.t)!r}")
         ss.dae.t[...] = k / step_rate  # hold the clock exactly on the grid
+        tds.deltatmin = 1.0 / step_rate  # ANDES trims h by 5 % after a step with >= 7 Newton iterations
         grab(k)
 
     tds.streaming_step = on_step
@@ -982,15 +983,16 @@ def write_manifest():
             "Written by `experiments/andes_bench/generate.py` (ANDES, GPL-3, run in its own venv; only "
             "that script imports it). All recordings are noise-free.", "",
             "Conventions: `time_s` from 0; per machine tag `B<bus>_G<id>`: `F` bus frequency [Hz] "
-            "(central difference of the bus-voltage angle over +-1/240 s), `VM` [pu of bus kV], `VA` "
-            "[deg, (-180, 180]], `IM` [pu on the 100 MVA system base at the bus kV], `IA` [deg]; current "
-            "= conj((Pe + jQe)/V) of the machine itself, flowing out of the machine (generator "
-            "convention). Events at 60 frames/s, 70 s, event at t = 10 s (the t = 10 s frame is "
+            "(central difference of the bus-voltage angle over +-1 integration step), `VM` [pu of bus "
+            "kV], `VA` [deg, (-180, 180]], `IM` [pu on the 100 MVA system base at the bus kV], `IA` "
+            "[deg]; current = conj((Pe + jQe)/V) of the machine itself, flowing out of the machine "
+            "(generator convention). Events at 60 frames/s, 70 s, event at t = 10 s (the t = 10 s frame is "
             "pre-event, its F straddles the switching); ambient at 30 frames/s, 600 s. Truth files: "
             "`delta_rad` (ANDES rotor angle, same frame as VA, unwrapped), `omega_pu`, `pm_pu_mbase` "
             "(mechanical torque), `pe_pu_mbase` (air-gap torque; ra = 0 so = terminal P), machine base. "
             "Swing equation: 2H d(omega)/dt = pm - pe - D (omega - 1). Integration: implicit trapezoid, "
-            "h = 1/240 s. Loads are constant impedances in the dynamics. H, D, machine, governor, "
+            "h = 1/240 s (events), 1/120 s (ambient). Loads are constant impedances in the dynamics. "
+            "H, D, machine, governor, "
             "exciter and PSS data: `truth.json`; the simulated network: `<case>.raw` (PSS/E v33) and "
             "`<case>.dyr`.", ""]
     total = 0

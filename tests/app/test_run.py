@@ -34,10 +34,9 @@ figures = false
 
 
 @pytest.fixture(scope="module")
-def base_columns(plant):
-    sim = jd.simulate(plant, jd.Scenario(duration_s=60.0, frame_rate_hz=25.0, seed=8))
+def base_columns(pmu25):
     spec = jd.MeasurementSpec(file=(), columns=COLS, v_base_kv=400.0)
-    return jd.phasor_columns(sim.recording, spec)
+    return jd.phasor_columns(pmu25.recording, spec)
 
 
 def run(tmp_path, columns, extra="", config=None, capsys=None):

@@ -17,7 +17,7 @@ def _finite(est):
 @pytest.mark.parametrize("event", [jd.Event(30.0, "load_step", 0.2), jd.Event(30.0, "line_trip", 3.0)])
 def test_stiff_events_stay_stable(plant, estimate_jit, event):
     """A 20 % load step or a line trip with gamma = 850: no NaN/inf, no divergence."""
-    sim = jd.simulate(plant, jd.Scenario(duration_s=90.0, seed=5, events=(event,)))
+    sim = jd.simulate(plant, jd.Scenario(duration_s=60.0, seed=5, events=(event,)))
     est = estimate_jit(sim.recording, plant, jd.ObserverConfig(gamma1=850.0, gamma2=850.0),
                        jd.Settings(), None, sim.truth.a2)
     assert _finite(est) and bool(est.solver_ok)
@@ -70,52 +70,53 @@ def test_frequency_from_voltage_angle(ambient, plant, estimate_jit):
     assert abs(float(est.a2 - ambient.truth.a2)) / float(ambient.truth.a2) < 0.03
 
 
-def _short(ambient, seconds=20.0):
-    rec = ambient.clean
-    n = int(seconds * 50) + 1
-    return jax.tree_util.tree_map(lambda x: x[:n], rec)
+FAST = jd.Settings.fast()
 
 
-def test_vmap_over_configurations(ambient, plant):
-    rec = _short(ambient)
+def test_vmap_over_configurations(short, plant, estimate_jit):
     gammas = jnp.linspace(200.0, 1600.0, 8)
     cfgs = jax.vmap(lambda g: jd.ObserverConfig(gamma1=g, gamma2=g))(gammas)
-    out = jax.jit(jax.vmap(jd.estimate, in_axes=(None, None, 0)))(rec, plant, cfgs)
+    out = jax.jit(jax.vmap(jd.estimate, in_axes=(None, None, 0, None)))(short, plant, cfgs, FAST)
     assert out.a2.shape == (8,)
-    single = jax.jit(jd.estimate)(rec, plant, jd.ObserverConfig(gamma1=gammas[3], gamma2=gammas[3]))
+    single = estimate_jit(short, plant, jd.ObserverConfig(gamma1=gammas[3], gamma2=gammas[3]), FAST)
     np.testing.assert_allclose(out.a2[3], single.a2, rtol=1e-10)
+    assert len(np.unique(np.round(np.asarray(out.a2), 8))) == 8  # the gammas made a difference
 
 
-def test_vmap_over_generators(ambient, plant):
-    rec = _short(ambient)
-    recs = jax.tree_util.tree_map(lambda x: jnp.stack([x] * 4), rec)
-    hs = jnp.array([4.0, 5.0, 6.0, 7.0])
-    plants = jax.vmap(lambda h: jd.Plant(machine=jd.Machine(h_s=h)))(hs)
-    out = jax.jit(jax.vmap(jd.estimate, in_axes=(0, 0, None)))(recs, plants, jd.ObserverConfig())
-    assert out.a2.shape == (4,) and bool(jnp.all(jnp.isfinite(out.a2)))
-    np.testing.assert_allclose(out.h_s[2], jax.jit(jd.estimate)(rec, plant, jd.ObserverConfig()).h_s,
-                               rtol=1e-10)
+def test_vmap_over_generators(short, plant, estimate_jit):
+    """Plants that differ in what the estimator reads (xq: the rotor angle; the governor droop:
+    Tm): each member equals its own single run, and the members differ."""
+    plants = [jd.Plant(machine=jd.Machine(xq_pu=xq), governor=jd.TGOV1(r_pu=r))
+              for xq, r in ((1.5, 0.04), (1.7, 0.05), (1.9, 0.06))]
+    recs = jax.tree_util.tree_map(lambda x: jnp.stack([x] * 3), short)
+    out = jax.jit(jax.vmap(jd.estimate, in_axes=(0, 0, None, None)))(recs, jd.stack(plants),
+                                                                     jd.ObserverConfig(), FAST)
+    assert out.a2.shape == (3,) and bool(jnp.all(jnp.isfinite(out.a2)))
+    for k, p in enumerate(plants):
+        single = estimate_jit(short, p, jd.ObserverConfig(), FAST)
+        np.testing.assert_allclose(out.a2[k], single.a2, rtol=1e-10)
+        np.testing.assert_allclose(out.t_ref_pu[k], single.t_ref_pu, rtol=1e-12)
+    assert abs(float(out.a2[0] - out.a2[2])) > 1e-3 * abs(float(out.a2[1]))
 
 
-def test_gradients_match_finite_differences(ambient, plant):
-    """d loss / d(gamma, lambda, c, K, H) vs central differences on 20 s, float64."""
-    rec = _short(ambient)
+def test_gradients_match_finite_differences(short, plant):
+    """d loss / d(gamma, lambda, c, K, xq, R) vs central differences on 20 s, float64. The
+    plant parameters are ones the estimator reads (xq: rotor angle; R: the governor's Tm)."""
     # Fixed steps: the discrete map is then smooth in the parameters, so that central
     # differences are meaningful (adaptive step acceptance makes the loss jump by ~rtol).
-    fixed = jd.Integrator(adaptive=False, substeps=4)
-    tight = jd.Settings(observer_integrator=fixed, playback_integrator=fixed)
+    tight = FAST
 
     def loss(params):
         cfg = jd.ObserverConfig(gamma1=params["gamma"], gamma2=params["gamma"],
                                 lambda1=params["lambda1"], c1=params["c1"], k_ext=params["k"])
-        p = jd.Plant(machine=jd.Machine(h_s=params["h"]), line=plant.line,
-                     transformer=plant.transformer, aux=plant.aux)
-        est = jd.estimate(rec, p, cfg, tight)
+        p = jd.Plant(machine=jd.Machine(xq_pu=params["xq"]), line=plant.line,
+                     transformer=plant.transformer, aux=plant.aux, governor=jd.TGOV1(r_pu=params["r"]))
+        est = jd.estimate(short, p, cfg, tight)
         tr = est.trajectories
         return est.a2 + jnp.mean((tr.x2_hat_rad_s - tr.x2_meas_rad_s) ** 2) * 1e3 + \
             jnp.mean(tr.playback.p_t_pu)
 
-    params = {"gamma": 850.0, "lambda1": 8.0, "c1": 8.0, "k": 6.5, "h": 6.18}
+    params = {"gamma": 850.0, "lambda1": 8.0, "c1": 8.0, "k": 6.5, "xq": 1.7, "r": 0.05}
     params = {k: jnp.asarray(v) for k, v in params.items()}
     grads = jax.jit(jax.grad(loss))(params)
     f = jax.jit(loss)
@@ -124,14 +125,15 @@ def test_gradients_match_finite_differences(ambient, plant):
         up = dict(params, **{name: params[name] + h})
         dn = dict(params, **{name: params[name] - h})
         fd = (float(f(up)) - float(f(dn))) / (2 * h)
-        assert abs(float(g) - fd) <= 1e-4 * max(abs(fd), 1e-8), (name, float(g), fd)
+        assert abs(fd) > 1e-6, (name, fd)  # the parameter matters: the check can fail
+        assert abs(float(g) - fd) <= 1e-4 * abs(fd), (name, float(g), fd)
 
 
-def test_unstable_fixed_steps_hold_last_finite_state_and_report_failure(ambient, plant):
+def test_unstable_fixed_steps_hold_last_finite_state_and_report_failure(ambient, plant, estimate_jit):
     """gamma far past the explicit step's stability limit: no NaN comes out, solver_ok says so."""
-    st = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
+    st = jd.Settings.fast(keep="final", playback=False)
     cfg = jd.ObserverConfig(gamma1=1e9, gamma2=1e9)
-    est = jax.jit(jd.estimate, static_argnums=3)(ambient.recording, plant, cfg, st)
+    est = estimate_jit(ambient.recording, plant, cfg, st)
     assert not bool(est.solver_ok) and not bool(est.converged)
     assert np.all(np.isfinite([float(est.a1), float(est.a2)]))
 

@@ -17,10 +17,9 @@ N_EST = 1400
 
 
 @pytest.fixture(scope="module")
-def base(plant):
-    sim = jd.simulate(plant, jd.Scenario(duration_s=60.0, frame_rate_hz=25.0, seed=21))
+def base(pmu25):
     spec = jd.MeasurementSpec(file=(), columns=COLS, v_base_kv=400.0, min_segment_s=20.0)
-    return spec, jd.phasor_columns(sim.recording, spec)
+    return spec, jd.phasor_columns(pmu25.recording, spec)
 
 
 damage = st.fixed_dictionaries({

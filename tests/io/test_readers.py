@@ -30,8 +30,8 @@ def assert_same(rec, back, atol=1e-9, rel=False):
 
 
 @pytest.fixture(scope="module")
-def short(plant):
-    return jd.simulate(plant, jd.Scenario(duration_s=40.0, frame_rate_hz=25.0, seed=5))
+def short(pmu25):
+    return pmu25
 
 
 @pytest.mark.parametrize("vu, cu, au, direction, tu", [

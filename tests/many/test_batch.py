@@ -1,5 +1,6 @@
 """Batched estimation: padding and masking, output selection, sharding, jax.distributed."""
 
+import json
 import os
 import subprocess
 import sys
@@ -12,30 +13,23 @@ import pytest
 
 import jaxdse as jd
 
-FAST = jd.Settings(observer_integrator=jd.Integrator.fast(), playback_integrator=jd.Integrator.fast())
-FINAL = jd.Settings(observer_integrator=jd.Integrator.fast(), playback_integrator=jd.Integrator.fast(),
-                    keep="final")
+FAST = jd.Settings.fast()
+FINAL = jd.Settings.fast(keep="final")
 SCALARS = ("a1", "a2", "h_s", "d_pu_s", "t_ref_pu", "convergence_time_s")
 
 
-def _cut(rec, n):
-    return jd.Recording(t_s=rec.t_s[:n], v_mag_pu=rec.v_mag_pu[:n], v_ang_rad=rec.v_ang_rad[:n],
-                        i_mag_pu=rec.i_mag_pu[:n], i_ang_rad=rec.i_ang_rad[:n],
-                        f_hz=None if rec.f_hz is None else rec.f_hz[:n], location=rec.location)
-
-
 @pytest.fixture(scope="module")
-def pair(ambient):
-    """Two recordings of different lengths (120 s and 77.3 s)."""
-    return [ambient.recording, _cut(ambient.recording, 3866)]
+def pair(ambient, short):
+    """Two recordings of different lengths (120 s and 20 s)."""
+    return [ambient.recording, short]
 
 
 @pytest.mark.parametrize("settings", [FAST, FINAL], ids=["trajectories", "final"])
-def test_padded_batch_equals_single_runs(pair, plant, settings):
+def test_padded_batch_equals_single_runs(pair, plant, settings, estimate_jit):
     cfg = jd.ObserverConfig(gamma1=2000.0, gamma2=2000.0)
     batch = jd.estimate_batch(pair, plant, cfg, settings)
     for k, rec in enumerate(pair):
-        one = jax.jit(jd.estimate, static_argnums=3)(rec, plant, cfg, settings)
+        one = estimate_jit(rec, plant, cfg, settings)
         got = jd.select(batch, k)
         for name in SCALARS:
             np.testing.assert_allclose(getattr(got, name), getattr(one, name), rtol=1e-9, atol=1e-12,
@@ -50,8 +44,8 @@ def test_padded_batch_equals_single_runs(pair, plant, settings):
 def test_final_mode_matches_trajectories(ambient, plant, estimate_jit):
     """keep="final" stores no trajectory but gives the same estimates and playback scores."""
     rec, a2 = ambient.recording, ambient.truth.a2
-    traj = jax.jit(jd.estimate, static_argnums=3)(rec, plant, jd.ObserverConfig(), FAST, None, a2)
-    fin = jax.jit(jd.estimate, static_argnums=3)(rec, plant, jd.ObserverConfig(), FINAL, None, a2)
+    traj = estimate_jit(rec, plant, jd.ObserverConfig(), FAST, None, a2)
+    fin = estimate_jit(rec, plant, jd.ObserverConfig(), FINAL, None, a2)
     assert fin.trajectories is None and fin.a2_hat.shape == (-(-rec.t_s.shape[0] // 50),)
     for name in ("a1", "a2", "h_s", "t_ref_pu"):
         np.testing.assert_allclose(getattr(fin, name), getattr(traj, name), rtol=1e-12)
@@ -64,13 +58,13 @@ def test_final_mode_matches_trajectories(ambient, plant, estimate_jit):
     np.testing.assert_allclose(fin.a2_hat, traj.a2_hat[ends], rtol=1e-12)
 
 
-def test_config_sweep_axis(ambient, plant):
+def test_config_sweep_axis(ambient, plant, estimate_jit):
     """A stacked batch of configurations on one recording, in chunks with progress."""
     cfgs = [jd.ObserverConfig(gamma1=g, gamma2=g) for g in (500.0, 850.0, 1500.0, 3000.0, 6000.0)]
     seen = []
     out = jd.estimate_batch(ambient.recording, plant, cfgs, FINAL, chunk=2, progress=seen.append)
     assert out.a2.shape == (5,) and seen == [2, 4, 5]
-    one = jax.jit(jd.estimate, static_argnums=3)(ambient.recording, plant, cfgs[3], FINAL)
+    one = estimate_jit(ambient.recording, plant, cfgs[3], FINAL)
     np.testing.assert_allclose(out.a2[3], one.a2, rtol=1e-12)
     with pytest.raises(ValueError, match="batch size"):
         jd.estimate_batch([ambient.recording] * 2, plant, cfgs, FINAL)
@@ -83,37 +77,42 @@ SCRIPT = textwrap.dedent("""
     if len(sys.argv) > 2:
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
         jax.distributed.initialize(coordinator_address="localhost:" + sys.argv[2], num_processes=2,
-                                   process_id=int(sys.argv[1]))
+                                   process_id=int(sys.argv[3]))
+    import numpy as np
     import jaxdse as jd
-    plant = jd.Plant()
-    rec = jd.simulate(plant, jd.Scenario(duration_s=40.0, seed=5)).recording
+    data = np.load(sys.argv[1])
+    rec = jd.Recording(**{k: data[k] for k in data.files})
     cfgs = [jd.ObserverConfig(gamma1=g, gamma2=g) for g in (400.0, 900.0, 1600.0, 2500.0, 5000.0)]
-    st = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
-    out = jd.estimate_batch(rec, plant, cfgs, st)
+    out = jd.estimate_batch(rec, jd.Plant(), cfgs, jd.Settings.fast(keep="final", playback=False))
     print(json.dumps({"devices": len(jax.devices()), "a2": out.a2.tolist(), "a1": out.a1.tolist()}))
 """)
+CONFIGS = (400.0, 900.0, 1600.0, 2500.0, 5000.0)
 
 
 def _run(args, env_extra, n=1):
     env = {**os.environ, "PYTHONPATH": str(Path(jd.__file__).parents[1]), **env_extra}
-    procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, *([str(k)] if n > 1 else []), *args],
+    procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, *args, *([str(k)] if n > 1 else [])],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
              for k in range(n)]
     outs = [p.communicate(timeout=300) for p in procs]
     for p, (out, err) in zip(procs, outs):
         assert p.returncode == 0, err[-2000:]
-    import json
     return [json.loads(out.strip().splitlines()[-1]) for out, _ in outs]
 
 
-def test_sharded_and_distributed_runs_equal_single_device():
-    """2 forced CPU devices, and 2 processes joined by jax.distributed: same results."""
-    single = _run([], {"XLA_FLAGS": ""})[0]
-    sharded = _run([], {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"})[0]
+@pytest.mark.slow
+def test_sharded_and_distributed_runs_equal_single_device(short, plant, tmp_path):
+    """2 forced CPU devices, and 2 processes joined by jax.distributed: the same results as this
+    process (1 device) on the same recording (read from a file, not simulated again)."""
+    fields = ("t_s", "v_mag_pu", "v_ang_rad", "i_mag_pu", "i_ang_rad", "f_hz")
+    np.savez(tmp_path / "rec.npz", **{k: np.asarray(getattr(short, k)) for k in fields})
+    cfgs = [jd.ObserverConfig(gamma1=g, gamma2=g) for g in CONFIGS]
+    single = jd.estimate_batch(short, plant, cfgs, jd.Settings.fast(keep="final", playback=False))
+    assert len(jax.devices()) == 1
+    sharded = _run([str(tmp_path / "rec.npz")], {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"})[0]
     port = str(20000 + os.getpid() % 20000)
-    dist = _run([port], {"XLA_FLAGS": ""}, n=2)
-    assert single["devices"] == 1 and sharded["devices"] == 2
-    assert all(d["devices"] == 2 for d in dist)
+    dist = _run([str(tmp_path / "rec.npz"), port], {"XLA_FLAGS": ""}, n=2)
+    assert sharded["devices"] == 2 and all(d["devices"] == 2 for d in dist)
     for other in (sharded, *dist):
-        np.testing.assert_allclose(other["a2"], single["a2"], rtol=1e-12)
-        np.testing.assert_allclose(other["a1"], single["a1"], rtol=1e-12)
+        np.testing.assert_allclose(other["a2"], single.a2, rtol=1e-12)
+        np.testing.assert_allclose(other["a1"], single.a1, rtol=1e-12)

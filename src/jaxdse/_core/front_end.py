@@ -80,9 +80,9 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
                              recording.location, ctx.p_lv_sum, ctx.p_lv_count)
     i_t = mapped.i_sg * plant.current_scale
     alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0)
-    f_hz = recording.f_hz
-    if f_hz is None:
-        f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
+    f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
+    if recording.f_hz is not None:  # the channel where it has a value, else the derived one
+        f_hz = jnp.where(jnp.isnan(recording.f_hz), f_hz, recording.f_hz)
     x2_meas = measured_speed_deviation(f_hz, alg.delta_rad, theta_ref, dt, m.f_nominal_hz, hw, n)
     theta_t = theta_ref + unwrap_continuing(jnp.angle(mapped.v_t), None if context is None
                                             else ctx.theta_t0 - theta_ref[0])

@@ -30,7 +30,8 @@ class Recording(eqx.Module):
     i_ang_rad: Float[Array, " T"] = eqx.field(converter=as_float)
     """Current angle [rad]."""
     f_hz: Float[Array, " T"] | None = eqx.field(default=None)
-    """Measured frequency [Hz]; None when the recording has no frequency channel."""
+    """Measured frequency [Hz]; None when the recording has no frequency channel. Samples
+    that are NaN take the frequency derived from the voltage angle (``front_end``)."""
     n_samples: Array | None = eqx.field(default=None)
     """Number of valid samples when the arrays are padded at the end (see
     :func:`jaxdse.stack_recordings`); None: all samples are valid."""

@@ -38,20 +38,27 @@ def stack_recordings(recordings: Sequence[Recording]) -> Recording:
     """
     if len({r.location for r in recordings}) != 1:
         raise ValueError("a batch of recordings must share one measurement location")
-    if len({r.f_hz is None for r in recordings}) != 1:
-        raise ValueError("either every recording of a batch has a frequency channel or none")
     size = max(int(np.shape(r.t_s)[0]) for r in recordings)
-    return stack([pad_recording(r, size) for r in recordings])
+    with_f = any(r.f_hz is not None for r in recordings)
+    return stack([pad_recording(r, size, with_f) for r in recordings])
 
 
-def pad_recording(r: Recording, size: int) -> Recording:
-    """``r`` padded at the end to ``size`` samples (host arrays), with ``n_samples`` set."""
+def pad_recording(r: Recording, size: int, with_frequency: bool | None = None) -> Recording:
+    """``r`` padded at the end to ``size`` samples (host arrays), with ``n_samples`` set.
+
+    ``with_frequency=True`` gives a recording without a frequency channel an all-NaN one (the
+    pipeline then derives f from the angle, as without a channel), so that recordings with and
+    without one share one structure (one compilation); None keeps the recording's own choice.
+    """
     def pad(x):
         return pad_end(x, size)
 
+    f_hz = r.f_hz
+    if f_hz is None and with_frequency:
+        f_hz = np.full(np.shape(r.t_s), np.nan)
     return Recording(t_s=pad_end(r.t_s, size, time=True), v_mag_pu=pad(r.v_mag_pu),
                      v_ang_rad=pad(r.v_ang_rad), i_mag_pu=pad(r.i_mag_pu), i_ang_rad=pad(r.i_ang_rad),
-                     f_hz=None if r.f_hz is None else pad(r.f_hz),
+                     f_hz=None if f_hz is None else pad(f_hz),
                      n_samples=np.asarray(np.shape(r.t_s)[0] if r.n_samples is None else r.n_samples),
                      location=r.location)
 
