@@ -10,6 +10,8 @@ results.md next to this file; README quotes the table.
 * dynamax UKF and filterpy UKF on the 3rd-order model, driven by the same terminal voltage,
   Ef and Tm, measuring P_t and Q_t: state estimation (a1, a2 known), and joint state and
   parameter estimation (augmented state with a1, a2).
+* jaxdse batch identification (``identify``) on the same recordings at the joint UKF's batch:
+  the default settings and the sandwich interval without bootstrap or filter spread.
 * Gradient cost: value-and-grad of the tuning loss over the forward loss, in forward and
   reverse mode, for 1, 4 and 16 recordings.
 * Peak memory (separate processes, recording memory-mapped from .npy files written by another
@@ -50,6 +52,8 @@ except ImportError:  # pragma: no cover
     ParamsNLGSSM = None
 
 FAST = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
+IDENTIFY_CHUNK = 128
+"""Recordings per call of the batch identification (bounds the bootstrap's memory)."""
 
 
 def timed(fn, repeat=3):
@@ -374,6 +378,29 @@ def main() -> None:
         ukf_res[f"filterpy_{name}"] = fp_entry
         print(name, ukf_res[f"dynamax_{name}"], fp_entry, flush=True)
     res["ukf"] = ukf_res
+
+    # batch identification (jd.identify) on the same recordings, at the joint UKF's batch
+    b = 64 if args.quick else 1024
+    recs, idx = tile(sims, b)
+    ident = {}
+    for name, ids in (("default", jd.IdentifySettings()),
+                      ("sandwich", jd.IdentifySettings(bootstrap_draws=0, spread_scales=()))):
+        one = jax.jit(jax.vmap(lambda r, ids=ids: jd.identify(r, plant, cfg, jd.Settings(), ids).a2))
+        chunks = [jax.device_put(jax.tree_util.tree_map(lambda x, k=k: x[k:k + IDENTIFY_CHUNK], recs), shard)
+                  for k in range(0, b, IDENTIFY_CHUNK)]  # sharded over the devices, as the UKFs
+
+        def fn(one=one, chunks=chunks):
+            return np.concatenate([np.asarray(one(c)) for c in chunks])
+
+        first, best, out = timed(fn, repeat=1)
+        ident[name] = {"batch": b, "gen_samples_per_s": b * n_t / best, "compile_s": first - best,
+                       "a2_error_percent_median_abs": float(np.median(np.abs(
+                           100 * (np.asarray(out)[: len(sims)] - a2_true) / a2_true))),
+                       "bootstrap_draws": ids.bootstrap_draws, "filter_spread": bool(ids.spread_scales)}
+        print("identify", name, ident[name], flush=True)
+    res["identify"] = ident
+    res["identify_gen_samples_per_s"] = ident["default"]["gen_samples_per_s"]
+    res["identify_a2_error_percent_median"] = ident["default"]["a2_error_percent_median_abs"]
     res["dynamax_ukf_gen_samples_per_s"] = ukf_res["dynamax_state"]["gen_samples_per_s"]
     res["filterpy_ukf_gen_samples_per_s"] = ukf_res["filterpy_state"]["gen_samples_per_s"]
 
@@ -416,11 +443,18 @@ def write_table(res, path):
     for k, v in u.items():
         lines.append(f"| {k.replace('_', ' UKF ')} | {v['batch']} | {v['gen_samples_per_s']:,.0f} | "
                      f"{v.get('compile_s', 0):.1f} | {rel(v['gen_samples_per_s'])} |")
+    for k, v in res.get("identify", {}).items():
+        what = f"{v['bootstrap_draws']} bootstrap draws" if v["bootstrap_draws"] else "sandwich interval"
+        what += ", filter spread" if v["filter_spread"] else ""
+        lines.append(f"| jaxdse identify ({k}: {what}) | {v['batch']} | {v['gen_samples_per_s']:,.0f} | "
+                     f"{v['compile_s']:.1f} | {rel(v['gen_samples_per_s'])} |")
     lines += ["", "| accuracy | x2 RMSE rad/s (2nd half) | a2 error % |", "|---|---|---|"]
     a = res["jaxdse_accuracy"]
     lines.append(f"| jaxdse fast | {a['fast (Heun, 1 step/sample)']['x2_rmse_rad_s_median']:.4f} | "
                  f"{a['fast (Heun, 1 step/sample)']['a2_error_percent_median_abs']:.2f} (median abs, 8 rec.) |")  # noqa: E501
     lines.append(f"| jaxdse adaptive | | {a['adaptive (Tsit5)']['a2_error_percent_median_abs']:.2f} |")
+    for k, v in res.get("identify", {}).items():
+        lines.append(f"| jaxdse identify ({k}) | | {v['a2_error_percent_median_abs']:.3f} (median abs) |")
     for k, v in u.items():
         x2 = v.get("x2_rmse_rad_s_median", v.get("x2_rmse_rad_s"))
         a2 = v.get("a2_error_percent_median_abs", v.get("a2_error_percent"))

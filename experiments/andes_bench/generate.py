@@ -67,13 +67,14 @@ LOAD_STEP_FRACTION = 0.05  # load step: 5 % of the total system load
 LOAD_STEP_MAX_RISE = 0.25  # ... spread over the nearest loads so that none rises by more than 25 %
 GEN_TRIP_FRACTION = 0.03  # generator trip: the unrecorded unit whose output is nearest 3 % of load
 OU_TAU_S = 5.0  # ambient: time constant of every load's Ornstein-Uhlenbeck process
+# ou_sigma: relative std of each load; wecc at 0.05 lost synchronism within the 600 s, hence 0.02
 
 CASES = {
     "ieee14": {"files": ("ieee14/ieee14_full.xlsx",), "n_record": None, "ou_sigma": 0.03, "seed": 14},
     "npcc": {"files": ("npcc/npcc.raw", "npcc/npcc_full.dyr"), "n_record": 10, "ou_sigma": 0.03,
              "seed": 140},
-    "wecc": {"files": ("wecc/wecc.raw", "wecc/wecc_full.dyr"), "n_record": 10, "ou_sigma": 0.05,
-             "seed": 179},
+    "wecc": {"files": ("wecc/wecc.raw", "wecc/wecc_full.dyr"), "n_record": 10, "ou_sigma": 0.02,
+             "seed": 179, "load_step_max_rise": 0.10},  # 25 %: 3 GW at buses 77-79, loss of synchronism
 }
 
 # Standard models with typical data, added only to GENROU units that the case leaves without one.
@@ -108,7 +109,8 @@ GENROU_PARAMS = ("ra", "xl", "xd", "xq", "xd1", "xq1", "xd2", "xq2", "Td10", "Tq
 MEANING = {
     "TGOV1": "R droop [pu speed/pu power], T1 valve [s], VMAX/VMIN valve limits [pu], T2/T3 lead/lag [s], "
              "Dt turbine damping [pu]",
-    "IEEEG1": "PSS/E IEEEG1 (K=1/R, T1..T7 [s], UO/UC valve rates [pu/s], PMAX/PMIN [pu], K1..K8 fractions)",
+    "IEEEG1": "PSS/E IEEEG1 (K=1/R, T1..T7 [s], UO/UC valve rates [pu/s], PMAX/PMIN [pu], K1..K8 fractions); "
+              "UO/UC as ANDES 2.0 simulates them: its data value times Sb/Tn",
     "IEEEX1": "PSS/E IEEEX1 (IEEE DC1A-like), limits and gains in pu",
     "ESDC2A": "PSS/E ESDC2A (IEEE DC2A)",
     "EXST1": "PSS/E EXST1 (IEEE ST1)",
@@ -276,10 +278,12 @@ def choose_events(ss, case, machines):
     for i in loads:
         chosen.append(i)
         acc += ss.PQ.p0.v[i]
-        if acc * LOAD_STEP_MAX_RISE >= step:
+        if acc * CASES[case].get("load_step_max_rise", LOAD_STEP_MAX_RISE) >= step:
             break
     factor = 1 + step / acc
     load = {"near_machine": ref["tag"], "factor": factor, "step_mw_at_pf_voltage": step * sb,
+            "rule": "loads by hop distance from the machine bus (then size) until no load rises by more "
+                    f"than {CASES[case].get('load_step_max_rise', LOAD_STEP_MAX_RISE):.0%}; all scaled alike",
             "total_system_load_mw": total_load * sb,
             "loads": [{"andes_idx": ss.PQ.idx.v[i], "bus": int(ss.PQ.bus.v[i]),
                        "hops_from_machine_bus": hops[ss.PQ.bus.v[i]], "p_mw": ss.PQ.p0.v[i] * sb,
@@ -591,6 +595,11 @@ def dyn_params(mdl, i, names):
             vals[n] = 0.0
         else:
             vals[n] = float(getattr(mdl, n).vin[i])
+        if mdl.class_name == "IEEEG1" and n in ("UO", "UC"):
+            # ANDES 2.0 applies the valve rate limits on the system base: the rate it simulates,
+            # in pu of the turbine rating per second, is UO * Sb / Tn. Matched to its tm output
+            # (rms 1e-7 pu over the wecc events); the files record the rates as simulated.
+            vals[n] *= float(mdl.system.config.mva) / float(mdl.Sn.v[i])
     return vals
 
 

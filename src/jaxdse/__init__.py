@@ -7,7 +7,10 @@ The public API is flat; the code lives in private subpackages by pipeline layer:
 (the command-line tool).
 """
 
+from . import _xla_flags  # noqa: F401  # isort: skip  (before anything starts JAX's CPU backend)
+from ._version import __version__ as __version__  # isort: skip  (first: the app reads it)
 from ._app.demo import demo_scenarios as demo_scenarios
+from ._app.fleet import fleet as fleet
 from ._app.report import format_table as format_table
 from ._app.report import plot_estimates as plot_estimates
 from ._app.report import summary_entry as summary_entry
@@ -17,12 +20,24 @@ from ._core.algebraic import algebraic_observer as algebraic_observer
 from ._core.drem import ObserverConfig as ObserverConfig
 from ._core.drem import ObserverSolution as ObserverSolution
 from ._core.drem import run_observer as run_observer
+from ._core.estimate import Replay as Replay
 from ._core.estimate import estimate as estimate
+from ._core.estimate import replay as replay
+from ._core.governor import GAST as GAST
+from ._core.governor import GGOV1 as GGOV1
+from ._core.governor import HYGOV as HYGOV
+from ._core.governor import IEEEG1 as IEEEG1
 from ._core.governor import TGOV1 as TGOV1
 from ._core.governor import AbstractGovernor as AbstractGovernor
+from ._core.governor import ScaledGovernor as ScaledGovernor
+from ._core.governor import WeightedGovernor as WeightedGovernor
+from ._core.identify import Identified as Identified
+from ._core.identify import IdentifySettings as IdentifySettings
+from ._core.identify import identify as identify
 from ._core.integrate import Integrator as Integrator
 from ._core.integrate import Trapezoid as Trapezoid
 from ._core.machine import Machine as Machine
+from ._core.machine import QAxisCircuits as QAxisCircuits
 from ._core.machine import electrical_torque as electrical_torque
 from ._core.machine import stator_currents as stator_currents
 from ._core.machine import terminal_dq as terminal_dq
@@ -46,6 +61,12 @@ from ._core.result import Scores as Scores
 from ._core.result import Trajectories as Trajectories
 from ._core.sequence import positive_sequence as positive_sequence
 from ._core.settings import Settings as Settings
+from ._core.verdict import VERDICTS as VERDICTS
+from ._core.verdict import Verdict as Verdict
+from ._core.verdict import VerdictSettings as VerdictSettings
+from ._core.verdict import assess as assess
+from ._core.verdict import describe as describe
+from ._core.verdict import verdict as verdict
 from ._io.config import GeneratorRun as GeneratorRun
 from ._io.config import RunConfig as RunConfig
 from ._io.config import load_config as load_config
@@ -57,6 +78,8 @@ from ._io.measurement import MeasurementSpec as MeasurementSpec
 from ._io.measurement import condition as condition
 from ._io.measurement import phasor_columns as phasor_columns
 from ._io.measurement import read_measurement as read_measurement
+from ._io.psse import read_dyr as read_dyr
+from ._io.psse import read_raw as read_raw
 from ._io.readers import Table as Table
 from ._io.readers import load_table as load_table
 from ._many.batch import estimate_batch as estimate_batch
@@ -81,5 +104,3 @@ from ._sim.simulate import Scenario as Scenario
 from ._sim.simulate import Simulation as Simulation
 from ._sim.simulate import Truth as Truth
 from ._sim.simulate import simulate as simulate
-
-__version__ = "0.1.0"

@@ -13,17 +13,19 @@ matplotlib.use("Agg")
 def test_demo_command_writes_contract(demo_run):
     rc, out, printed, summary = demo_run
     assert rc == 0
-    assert "a2 ref" in printed and "auto" in printed and "cross" in printed
+    assert "H ref" in printed and "verdict" in printed and "auto" in printed and "cross" in printed
     names = [e["name"] for e in summary["recordings"]]
     assert names == ["auto", "cross"]
     for e in summary["recordings"]:
-        for key in ("a1", "a2", "H_s", "D", "a2_reference", "H_reference_s", "convergence_time_s",
-                    "smape_percent", "n_samples", "duration_s"):
+        for key in ("a1", "a2", "H_s", "H_ci95", "D", "verdict", "reasons", "a2_reference",
+                    "H_reference_s", "online", "identification", "smape_percent", "n_samples",
+                    "duration_s"):
             assert key in e
+        assert "convergence_time_s" in e["online"]
         assert set(e["smape_percent"]) == {"x2_observer", "x2_playback", "I_t", "P_t", "Q_t"}
         header = (out / f"estimates_{e['name']}.csv").read_text().splitlines()[0]
         assert header == ("time_s,delta_rad,x2_hat_rad_s,x2_meas_rad_s,e_q_prime_pu,a1_hat,a2_hat,"
-                          "t_e_pu,t_m_pu,e_f_pu,x2_sim_rad_s,i_t_sim_pu,p_t_sim_pu,q_t_sim_pu")
+                          "t_e_pu,t_m_pu,e_f_pu,i_t_pu,p_t_pu,q_t_pu,x2_sim_rad_s,i_t_sim_pu,p_t_sim_pu,q_t_sim_pu")
         for fig in ("convergence", "x2", "playback"):
             assert (out / f"{fig}_{e['name']}.png").stat().st_size > 10_000
 

@@ -13,6 +13,8 @@ from jaxdse._app.cli import main
 ROOT = Path(__file__).resolve().parents[2]
 COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
 CONFIG = """
+plant_defaults = "paper"
+
 [measurement]
 file = "pmu.csv"
 voltage_unit = "kV_LL"
@@ -57,7 +59,7 @@ def one_line_error(err: str) -> str:
 
 def assert_clean_estimates(summary):
     for e in summary["recordings"]:
-        assert e["flags"]["finite"]
+        assert e["online"]["flags"]["finite"]
         for k in ("a1", "a2", "H_s", "D"):
             assert e[k] is not None and np.isfinite(e[k])
 
@@ -171,8 +173,10 @@ def test_zero_current_is_reported_offline(tmp_path, base_columns, capsys):
     assert rc == 0, err
     e = s["recordings"][0]
     assert e["data_quality"]["median_current_pu_machine"] == 0.0
-    assert not e["flags"]["online"] and not e["converged"]
-    assert "not online" in e["not_converged_reason"] and e["convergence_time_s"] is None
+    o = e["online"]
+    assert not o["flags"]["online"] and not o["converged"] and e["verdict"] == "failed"
+    assert "not online" in o["not_converged_reason"] and o["convergence_time_s"] is None
+    assert "offline" in e["reasons"]
     assert_clean_estimates(s)
 
 
@@ -220,7 +224,7 @@ def test_shipped_example_configs_run(tmp_path, name, capsys):
     assert rc == 0, out.err
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     e = s["recordings"][0]
-    assert e["converged"] and abs(e["a2_error_percent"]) < 3
+    assert e["verdict"] == "identified" and abs(e["a2_error_percent"]) < 3
     assert e["smape_percent"]["P_t"] < 1 and e["smape_percent"]["I_t"] < 1
     for fig in ("convergence", "x2", "playback"):
         assert (tmp_path / "o" / f"{fig}_{e['name']}.png").exists()
@@ -235,7 +239,7 @@ def test_isone_config_estimates_all_three_generators(tmp_path, capsys):
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert [e["generator"] for e in s["recordings"]] == ["sub6_gen1", "sub7_gen2", "sub8_gen1"]
     for e in s["recordings"]:
-        assert e["flags"]["finite"] and e["a2"] is not None and e["H_s"] is not None
+        assert e["online"]["flags"]["finite"] and e["a2"] is not None and e["H_s"] is not None
         assert e["smape_percent"]["P_t"] is not None and e["smape_percent"]["I_t"] is not None
 
 

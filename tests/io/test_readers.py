@@ -47,7 +47,7 @@ def test_csv_round_trip_in_user_units(short, tmp_path, vu, cu, au, direction, tu
                               time_unit=tu, v_base_kv=400.0, min_segment_s=10)
     cols = jd.phasor_columns(short.recording, spec)
     jd.write_csv(tmp_path / "x.csv", cols)
-    (t0, back), = jd.read_measurement(spec, 1100.0)[0]
+    (t0, back), = jd.read_measurement(spec, jd.Machine())[0]
     assert_same(short.recording, back)
     k = np.pi / 180 if au == "deg" else 1.0
     p_sign = np.sign(np.median(np.cos(k * (cols["IA"] - cols["VA"]))))
@@ -63,7 +63,7 @@ def test_csv_three_phase_iso_timestamps_keep_positive_sequence(short, tmp_path):
     cols = jd.phasor_columns(short.recording, spec, short.v_abc, short.i_abc)
     jd.write_csv(tmp_path / "x.csv.gz", cols, time_column="ts",
                  start=datetime(2024, 1, 1, tzinfo=UTC))
-    segs, q = jd.read_measurement(spec, 1100.0)
+    segs, q = jd.read_measurement(spec, jd.Machine())
     assert q["start_time"].startswith("2024-01-01T00:00:00")
     # Timestamps carry microseconds: the grid is exact to 1e-6 s, phasors to 1e-9 pu.
     rec = jd.Recording(t_s=short.recording.t_s, v_mag_pu=short.recording.v_mag_pu,
@@ -81,7 +81,7 @@ def test_comtrade_round_trip(short, tmp_path, data_format):
     cols = jd.phasor_columns(short.recording, spec)
     t = cols.pop("time")
     jd.write_comtrade(tmp_path / "r.cfg", t, cols, {"VM": "kV", "IM": "A"}, data_format=data_format)
-    segs, q = jd.read_measurement(spec, 1100.0)
+    segs, q = jd.read_measurement(spec, jd.Machine())
     # int32 samples: ±180 degrees quantise to 7e-10 rad, i.e. 1e-9 relative to each phasor.
     assert_same(short.recording, segs[0][1], atol=1e-9, rel=True)
     table = jd.load_table(tmp_path / "r.cfg")
@@ -99,7 +99,7 @@ def test_comtrade_secondary_values_are_scaled_to_primary(short, tmp_path):
     k = next(n for n, line in enumerate(cfg) if ",IM," in line)
     cfg[k] = cfg[k][: -len("1,1,P")] + "2000,5,S"
     (tmp_path / "s.cfg").write_text("\r\n".join(cfg) + "\r\n")
-    segs, _ = jd.read_measurement(spec, 1100.0)
+    segs, _ = jd.read_measurement(spec, jd.Machine())
     assert_same(short.recording, segs[0][1], atol=1e-9, rel=True)
 
 
@@ -115,7 +115,7 @@ def test_mat_header_table_layout(short, tmp_path):
         label, qty = name.split("/")
         txt[:, c] = [label, qty, {"F": "HZ", "VM": "KV", "IM": "AMP"}.get(qty, "DEG")]
     scipy.io.savemat(tmp_path / "m.mat", {"num": num, "txt": txt})
-    segs, _ = jd.read_measurement(spec, 1100.0)
+    segs, _ = jd.read_measurement(spec, jd.Machine())
     assert_same(short.recording, segs[0][1])
     assert jd.load_table(tmp_path / "m.mat").units["G1/VM"] == "KV"
 
@@ -125,7 +125,7 @@ def test_mat_one_vector_per_channel(short, tmp_path):
                               current_unit="pu", angle_unit="rad", min_segment_s=10)
     cols = jd.phasor_columns(short.recording, spec)
     scipy.io.savemat(tmp_path / "v.mat", {k: v[:, None] for k, v in cols.items()})
-    segs, _ = jd.read_measurement(spec, 1100.0)
+    segs, _ = jd.read_measurement(spec, jd.Machine())
     assert_same(short.recording, segs[0][1])
 
 
@@ -146,7 +146,7 @@ def test_whitespace_text_in_several_files(short, tmp_path):
                                        "i_ang": "Ang/br 1|A 20.0|2|B"},
                               voltage_unit="pu", current_unit="pu", delimiter="whitespace",
                               quotechar="'", location="terminal", min_segment_s=10)
-    segs, _ = jd.read_measurement(spec, 1100.0)
+    segs, _ = jd.read_measurement(spec, jd.Machine())
     assert_same(rec, segs[0][1])
 
 

@@ -118,7 +118,7 @@ def test_sweep_and_tune_commands(tmp_path, capsys, plant):
     assert out["observer_tuned"] != out["observer_start"]  # BFGS moved
     # the reported loss is the loss of the reported configuration (recomputed independently)
     run = jd.load_config(cfg)
-    train = [jd.read_measurement(g.measurement, float(g.plant.machine.s_rated_mva))[0][0][1]
+    train = [jd.read_measurement(g.measurement, g.plant.machine)[0][0][1]
              for g in run.generators if g.role == "auto"]
     tuned = dataclasses.replace(run.observer, **out["observer_tuned"])
     again = jd.tuning_loss(tuned, jd.stack_recordings(train), run.generators[0].plant,

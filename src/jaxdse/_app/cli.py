@@ -33,7 +33,7 @@ run the estimator on both with the same configuration (auto- and cross-validatio
   DIR/estimates_<name>.csv     trajectories (time_s, delta_rad, x2_hat_rad_s, ...)
   DIR/convergence_<name>.png   a1_hat and a2_hat against their references
   DIR/x2_<name>.png            x2 observed vs measured
-  DIR/playback_<name>.png      playback errors of x2, I_t, P_t, Q_t
+  DIR/playback_<name>.png      measured vs playback x2, I_t, P_t, Q_t
 
 example:
   jaxdse demo --out demo_out
@@ -41,29 +41,43 @@ example:
 
 
 RUN_HELP = """\
-Read the PMU recording(s) named in CONFIG.toml, map them to the machine terminal, run the
-algebraic observer, the governor model, the DREM parameter estimator, the I&I speed observer
-and the event playback for every [[generator]], and write:
+Read the PMU recording(s) named in CONFIG.toml and, for every [[generator]]: screen the data
+(spikes, invalid frames, unit and set-up mistakes), map the phasors to the machine terminal,
+run the algebraic observer, the governor model and the paper's online DREM/I&I estimator,
+then identify H and D from the whole recording at once (with 95 % intervals), play the
+event back with them, and give one verdict per unit:
 
-  DIR/summary.json             per recording: a1, a2, H [s], D, convergence time, flags
-                               (excited, online, solver_ok, finite), playback sMAPE of
-                               x2, I_t, P_t, Q_t, and a "data_quality" section (rows read,
-                               duplicates, reordering, NaN, bridged gaps, splits, units)
+  identified          H within +-10 % at 95 % confidence, the playback follows the data
+  weakly identified   interval wider than +-10 %, or the online estimate disagrees
+  not identified      the data do not tell H apart (interval too wide or unbounded)
+  failed              offline, a solver failure, H <= 0 or a diverging playback
+
+Writes:
+  DIR/summary.json             per recording: H [s] with its 95 % interval, D, the verdict
+                               and its reasons, the online (DREM) estimate beside it, the
+                               playback sMAPE of x2, I_t, P_t, Q_t, a "data_quality" section
+                               (what was read, screened, bridged, split); and for the run:
+                               the jaxdse version, the sha256 of the config and every input
+                               file, the full plant, observer and settings used
   DIR/estimates_<name>.csv     trajectories: time_s, delta_rad, x2_hat_rad_s, a1_hat, a2_hat,
-                               E'q, Te, Tm, Ef, playback x2/I_t/P_t/Q_t
-  DIR/convergence_<name>.png   a1_hat, a2_hat (and the reference where known)
+                               E'q, Te, Tm, Ef, measured and playback x2/I_t/P_t/Q_t
+  DIR/convergence_<name>.png   online a1_hat, a2_hat with the identified value and interval
   DIR/x2_<name>.png            x2 estimated vs measured
-  DIR/playback_<name>.png      playback errors of x2, I_t, P_t, Q_t
+  DIR/playback_<name>.png      measured vs playback x2, I_t, P_t, Q_t; the title says the verdict
 
-The config describes the measurement (file, format csv|comtrade|mat, column names, units,
-bases, current direction, PMU location), the plant (line, transformer, aux, machine,
-governor) and the observer (paper Table I by default). See examples/*.toml.
+The config describes the measurement (file, format csv|comtrade|mat, layout, column names,
+units, bases, current direction, PMU location), the plant (line, transformer, aux, machine,
+governor: required as the location needs them, or plant_defaults = "paper") and the
+observer (paper Table I by default). See examples/*.toml.
 
-Exit status: 0 on success, 2 on bad input (missing file or column, unknown key, wrong unit,
-impossible value, gap too long) with a one-line message naming the file, column/key and row.
+Exit status: 0 on success; 2 on bad input (missing file or column, unknown key, wrong unit,
+implausible data, missing plant data) with a one-line message naming the file, column/key
+and row; 3 with --strict when any unit is not identified. Units that are not identified
+get a one-line warning on stderr either way.
 
 example:
   jaxdse run examples/csv_positive_sequence.toml --out out/
+  jaxdse run examples/isone_mat.toml --strict          # exit 3 unless every unit is identified
 """
 
 
@@ -116,12 +130,73 @@ mode up to 8 training recordings, where it is the cheaper one.
   autodiff = "auto"        # or "fwd", "bwd"
   weights = { x2 = 1.0, playback = 1.0, parameter = 1.0, burn_in_s = 10.0, band = 0.01 }
 
-Writes DIR/tune.json (losses, history, start and tuned values) and DIR/tuned_observer.toml
-(an [observer] section to paste into a config). A progress bar shows the loss per step.
+Generators may have different plants (each keeps its own). Writes DIR/tune.json (losses,
+history, start, tuned and recommended values) and DIR/tuned_observer.toml (an [observer]
+section to paste into a config). The tuned values are recommended only if the held-out loss
+(the training loss when no role = "cross" generator is given) got better; otherwise
+tuned_observer.toml keeps the start values and the command says so. A non-finite loss is an
+error (exit 1). A progress bar shows the loss per step.
 
 example:
   jaxdse tune examples/sweep_tune.toml --out tune_out/
 """
+
+
+FLEET_HELP = """\
+Estimate H and D of every plant of a PSS/E case from PMU recordings, in one batched call, and
+write a model-validation report a planner can file. Plant data come from the case: the
+in-service units with a machine record (GENCLS, GENSAL, GENROU, GENTPJ) on a bus form one
+plant on their summed MBASE; its reference H is the MBASE-weighted H of those records; its
+governor is the MBASE-weighted sum of the units' own TGOV1, IEEEG1, GAST, HYGOV or GGOV1
+(units without one hold their torque). Models the .dyr has beyond these are listed, not fatal.
+
+FLEET.toml (paths relative to it):
+  [case]         raw = "case.raw" (PSS/E rev 32/33), dyr = "case.dyr"
+  [measurement]  as in `jaxdse run`: file (one file, or a list of files sharing one time
+                 axis: columns are then "<file stem>/<column>"), format, units, s_base_mva,
+                 location = "terminal" | "hv" (HV side of the step-up transformer in the .raw)
+  [channels]     how each plant's columns are found, by pattern (* = any text):
+                   layout = "per_machine"     one plant per machine; {bus}, {id} fill names:
+                     time = "time_s", v_mag = "B{bus}_G{id}/VM", ... i_ang, frequency (optional)
+                   layout = "step_up_branch"  one plant per generator bus; the bus columns
+                     ({bus}) and the one branch that leaves the bus ({branch}):
+                     v_mag = "BusVolMag/{bus}|*", i_mag = "LinCurMag/{branch}", ...,
+                     branch = "{from}|*|{to}|*" (how a branch name shows its end buses; the
+                     end at the plant sets the current direction)
+                   name = "B{bus}_G{id}" (optional)
+  [[unit]]       or an explicit list instead of [channels]: name, bus, ids = ["1", ...]
+                 (default: every in-service unit of the bus), columns = {time, v_mag, v_ang,
+                 i_mag, i_ang, frequency}, current_direction
+  [criteria]     pass/fail limits: max_interval_percent (10), max_smape_i_t (5),
+                 max_smape_p_t (5), max_smape_q_t (10)
+  [observer] [settings] [identify]   as in `jaxdse run`;  [output] figures = true
+
+DIR gets:
+  DIR/report.html            fleet page: units to look at first, overview figure of H with 95 %
+                             intervals against the .dyr H (coloured by verdict), sortable table
+  DIR/units/<name>.html      one page per unit: measured vs simulated x2, I_t, P_t, Q_t, the
+                             verdict and its reasons in words, H, D and their intervals, errors
+                             over the pre-event, event and post-event windows, pass/fail against
+                             [criteria], the plant's units, data quality, provenance (sha256)
+  DIR/overview.png, DIR/units/<name>.png   the figures of these pages
+  DIR/fleet.json             "units": name, H_s, H_ci95, H_reference_s, H_error_percent,
+                             verdict, reasons, D, interval parts, playback sMAPE, governor
+                             models, data quality, ...; "skipped": plants not estimated, why
+  DIR/fleet.csv, DIR/report.md   the table
+
+Exit status: 0 on success; 2 on bad input (missing .raw/.dyr or recording, unknown key, no
+plant found) with a one-line message.
+
+example:
+  jaxdse fleet experiments/naspi_osl_case1/fleet.toml --out osl_fleet/
+"""
+
+
+def _fleet(args) -> int:
+    from .fleet import load_fleet, run_fleet
+
+    run_fleet(load_fleet(args.fleet), Path(args.out))
+    return 0
 
 
 def _sweep(args) -> int:
@@ -144,7 +219,11 @@ def _run(args) -> int:
     from .._io.config import load_config
     from .run import run_config
 
-    run_config(load_config(args.config), Path(args.out) if args.out else None)
+    summary = run_config(load_config(args.config), Path(args.out) if args.out else None)
+    shaky = [e["name"] for e in summary["recordings"] if e["verdict"] != "identified"]
+    if args.strict and shaky:
+        print(f"jaxdse: --strict: {len(shaky)} unit(s) not identified: {', '.join(shaky)}", file=sys.stderr)
+        return 3
     return 0
 
 
@@ -156,8 +235,11 @@ def _demo(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from .._version import __version__
+
     parser = argparse.ArgumentParser(prog="jaxdse", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"jaxdse {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     run = sub.add_parser("run", help="estimate states, H and D from the recordings in a TOML config",
                          description=RUN_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -165,6 +247,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", default=None,
                      help="output folder (default: [output] dir of the config, else jaxdse_out "
                           "beside it)")
+    run.add_argument("--strict", action="store_true",
+                     help="exit with status 3 when any unit's verdict is not 'identified'")
     run.set_defaults(func=_run)
     for name, helptext, desc, func in (
             ("sweep", "run many observer configurations at once ([sweep] of the config)", SWEEP_HELP,
@@ -176,6 +260,11 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument("--out", metavar="DIR", default=None,
                        help="output folder (default: [output] dir of the config)")
         p.set_defaults(func=func)
+    fl = sub.add_parser("fleet", help="every plant of a PSS/E case from PMU recordings, with a report",
+                        description=FLEET_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    fl.add_argument("fleet", metavar="FLEET.toml", help="fleet file (see `jaxdse fleet --help`)")
+    fl.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    fl.set_defaults(func=_fleet)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -207,6 +296,9 @@ def main(argv=None) -> int:
     except OSError as err:
         print(f"jaxdse: error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
         return 2
+    except FloatingPointError as err:  # a numerical failure, not bad input
+        print(f"jaxdse: error: {err}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from .._core.drem import ObserverConfig
 from .._core.estimate import estimate
 from .._core.plant import Plant
 from .._core.settings import Settings
+from .._core.verdict import assess
 from .._sim.simulate import Event, Scenario, simulate
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
 
@@ -34,7 +35,8 @@ def demo_scenarios(duration_s: float = 600.0, seed: int = 0, plant: Plant = Plan
 
 
 def run_demo(out_dir: Path, duration_s: float = 600.0, seed: int = 0, log=sys.stderr) -> list[dict]:
-    """Simulate, estimate (both recordings in one vmapped call), write outputs, print the table."""
+    """Simulate, estimate and identify (both recordings in one vmapped call), write outputs,
+    print the table."""
     out_dir.mkdir(parents=True, exist_ok=True)
     plant, config = Plant(), ObserverConfig()
     t0 = time.perf_counter()
@@ -47,16 +49,25 @@ def run_demo(out_dir: Path, duration_s: float = 600.0, seed: int = 0, log=sys.st
     names = list(sims)
     recs = jax.tree_util.tree_map(lambda *x: np.stack(x), *(sims[n].recording for n in names))
     a2_ref = np.array([float(sims[n].truth.a2) for n in names])
-    run = jax.jit(jax.vmap(estimate, in_axes=(0, None, None, None, None, 0)))
-    ests = run(recs, plant, config, Settings(), None, a2_ref)
+    settings = Settings(playback=False)  # the playback shown is the identified one (assess)
+
+    @jax.jit
+    @jax.vmap
+    def run(rec, a2):
+        est = estimate(rec, plant, config, settings, None, a2)
+        return est, assess(rec, plant, est, config, settings)
+
+    ests, (idents, reps, verds) = run(recs, a2_ref)
     entries = []
     for k, name in enumerate(names):
-        est = jax.tree_util.tree_map(lambda x: x[k], ests)
+        est, ident, rep, verd = (jax.tree_util.tree_map(lambda x: x[k], t)
+                                 for t in (ests, idents, reps, verds))
         truth = sims[name].truth
-        entries.append(summary_entry(name, est, a2_reference=truth.a2,
+        entries.append(summary_entry(name, est, ident, rep, verd, a2_reference=truth.a2,
                                      h_reference_s=plant.machine.h_s))
-        write_estimates_csv(out_dir / f"estimates_{name}.csv", est)
-        plot_estimates(est, name, out_dir, a1_reference=truth.a1, a2_reference=truth.a2)
+        write_estimates_csv(out_dir / f"estimates_{name}.csv", est, rep)
+        plot_estimates(est, name, out_dir, a1_reference=truth.a1, a2_reference=truth.a2, ident=ident,
+                       rep=rep, status=entries[-1]["verdict"])
     write_summary(out_dir / "summary.json", entries,
                   {"source": "jaxdse demo: simulated plant (jaxdse.simulate), truth known",
                    "wall_time_s": round(time.perf_counter() - t0, 2)})

@@ -9,21 +9,34 @@ from pathlib import Path
 
 import numpy as np
 
+from .._core.estimate import Replay
+from .._core.identify import Identified
 from .._core.result import Estimate
+from .._core.verdict import REASONS, Verdict, describe
+
+
+def _playback(est: Estimate, rep: Replay | None):
+    """The playback shown to the user: with the identified parameters when there are some."""
+    return rep.playback if rep is not None else est.trajectories.playback
+
 
 CSV_COLUMNS = {
-    "time_s": lambda e: e.time_s, "delta_rad": lambda e: e.trajectories.delta_rad,
-    "x2_hat_rad_s": lambda e: e.trajectories.x2_hat_rad_s,
-    "x2_meas_rad_s": lambda e: e.trajectories.x2_meas_rad_s,
-    "e_q_prime_pu": lambda e: e.trajectories.e_q1_pu, "a1_hat": lambda e: e.a1_hat,
-    "a2_hat": lambda e: e.a2_hat, "t_e_pu": lambda e: e.trajectories.t_e_pu,
-    "t_m_pu": lambda e: e.trajectories.t_m_pu, "e_f_pu": lambda e: e.trajectories.e_f_pu,
-    "x2_sim_rad_s": lambda e: e.trajectories.playback.x2_rad_s,
-    "i_t_sim_pu": lambda e: e.trajectories.playback.i_t_pu,
-    "p_t_sim_pu": lambda e: e.trajectories.playback.p_t_pu,
-    "q_t_sim_pu": lambda e: e.trajectories.playback.q_t_pu,
+    "time_s": lambda e, r: e.time_s, "delta_rad": lambda e, r: e.trajectories.delta_rad,
+    "x2_hat_rad_s": lambda e, r: e.trajectories.x2_hat_rad_s,
+    "x2_meas_rad_s": lambda e, r: e.trajectories.x2_meas_rad_s,
+    "e_q_prime_pu": lambda e, r: e.trajectories.e_q1_pu, "a1_hat": lambda e, r: e.a1_hat,
+    "a2_hat": lambda e, r: e.a2_hat, "t_e_pu": lambda e, r: e.trajectories.t_e_pu,
+    "t_m_pu": lambda e, r: e.trajectories.t_m_pu, "e_f_pu": lambda e, r: e.trajectories.e_f_pu,
+    "i_t_pu": lambda e, r: e.trajectories.i_t_pu, "p_t_pu": lambda e, r: e.trajectories.p_t_pu,
+    "q_t_pu": lambda e, r: e.trajectories.q_t_pu,
+    "x2_sim_rad_s": lambda e, r: _playback(e, r).x2_rad_s,
+    "i_t_sim_pu": lambda e, r: _playback(e, r).i_t_pu,
+    "p_t_sim_pu": lambda e, r: _playback(e, r).p_t_pu,
+    "q_t_sim_pu": lambda e, r: _playback(e, r).q_t_pu,
 }
-"""CSV column -> how to read it from an Estimate (the contract of the estimates CSV)."""
+"""CSV column -> how to read it from an (Estimate, Replay) pair (the contract of the estimates
+CSV). The ``*_sim`` columns are the playback with the identified parameters (the online ones
+when identification is off)."""
 
 
 def _num(x):
@@ -31,47 +44,76 @@ def _num(x):
     return None if not math.isfinite(x) else x
 
 
-def summary_entry(name: str, est: Estimate, a2_reference=None, h_reference_s=None) -> dict:
-    """One entry of ``summary.json["recordings"]``."""
+def _pair(x):
+    return [_num(x[0]), _num(x[1])]
+
+
+def summary_entry(name: str, est: Estimate, ident: Identified | None = None, rep: Replay | None = None,
+                  verdict: Verdict | None = None, a2_reference=None, h_reference_s=None) -> dict:
+    """One entry of ``summary.json["recordings"]``.
+
+    The headline values (``H_s``, ``H_ci95``, ``D``, ``verdict``) are the batch
+    identification's when it ran; ``online`` holds the paper's DREM/I&I estimate beside them.
+    """
     tr = est.trajectories
     x2_std = float(np.std(np.asarray(tr.x2_meas_rad_s)))
-    after = np.asarray(est.time_s) >= (float(est.convergence_time_s)
-                                       if bool(est.converged) else 0.0)
+    after = np.asarray(est.time_s) >= (float(est.convergence_time_s) if bool(est.converged) else 0.0)
     err = np.asarray(tr.x2_hat_rad_s - tr.x2_meas_rad_s)[after]
-    finite = bool(all(np.all(np.isfinite(np.asarray(get(est)))) for get in CSV_COLUMNS.values())
+    finite = bool(all(np.all(np.isfinite(np.asarray(get(est, rep)))) for get in CSV_COLUMNS.values())
                   and np.isfinite(float(est.a1)) and np.isfinite(float(est.a2)))
-    entry = {
-        "name": name,
-        "a1": _num(est.a1),
-        "a2": _num(est.a2),
-        "H_s": _num(est.h_s),
-        "D": _num(est.d_pu_s),
-        "a2_reference": _num(a2_reference) if a2_reference is not None else None,
-        "H_reference_s": _num(h_reference_s) if h_reference_s is not None else None,
-        "a2_error_percent": (_num(100 * (est.a2 - a2_reference) / abs(a2_reference))
-                             if a2_reference is not None else None),
+    online = {
+        "a1": _num(est.a1), "a2": _num(est.a2), "H_s": _num(est.h_s), "D": _num(est.d_pu_s),
         "convergence_time_s": _num(est.convergence_time_s),
         "converged": bool(est.converged) and finite and float(est.a2) > 0,
         "flags": {"excited": bool(est.excited), "online": bool(est.online),
                   "solver_ok": bool(est.solver_ok), "torque_balanced": bool(est.torque_balanced),
-                  "finite": finite,
-                  "a2_positive": bool(float(est.a2) > 0),
+                  "finite": finite, "a2_positive": bool(float(est.a2) > 0),
                   "log_contraction_a2": _num(est.log_contraction_end[1])},
-        "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
-                          "x2_playback": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
-                          "P_t": _num(est.smape.p_t), "Q_t": _num(est.smape.q_t)},
+        "x2_observer_smape_percent": _num(est.smape.x2_observer),
         "x2_observer_nrmse_percent": _num(100 * np.sqrt(np.mean(err**2)) / x2_std)
         if x2_std > 0 and err.size else None,
+        "playback_smape_percent": {"x2": _num(est.smape.x2_playback), "I_t": _num(est.smape.i_t),
+                                   "P_t": _num(est.smape.p_t), "Q_t": _num(est.smape.q_t)},
+    }
+    if not online["converged"]:
+        reasons = [k for k in ("excited", "online", "solver_ok", "torque_balanced", "finite", "a2_positive")
+                   if not online["flags"][k]]
+        online["not_converged_reason"] = ", ".join(f"not {r}" for r in reasons) or \
+            "a2_hat did not settle within the band"
+    final = ident if ident is not None else est
+    scores = rep.smape if rep is not None else est.smape
+    entry = {
+        "name": name,
+        "method": "batch identification" if ident is not None else "online DREM/I&I (identification off)",
+        "a1": _num(final.a1), "a2": _num(final.a2), "H_s": _num(final.h_s), "D": _num(final.d_pu_s),
+        "H_ci95": _pair(ident.h_ci95) if ident is not None else None,
+        "D_ci95": _pair(ident.d_ci95) if ident is not None else None,
+        "a2_reference": _num(a2_reference) if a2_reference is not None else None,
+        "H_reference_s": _num(h_reference_s) if h_reference_s is not None else None,
+        "a2_error_percent": (_num(100 * (final.a2 - a2_reference) / abs(a2_reference))
+                             if a2_reference is not None else None),
+        "smape_percent": {"x2_observer": _num(est.smape.x2_observer),
+                          "x2_playback": _num(scores.x2_playback), "I_t": _num(scores.i_t),
+                          "P_t": _num(scores.p_t), "Q_t": _num(scores.q_t)},
+        "online": online,
         "t_ref_pu": _num(est.t_ref_pu),
         "n_samples": int(np.shape(est.time_s)[0]),
         "duration_s": _num(est.time_s[-1] - est.time_s[0]),
     }
-    if not entry["converged"]:
-        reasons = [k for k in ("excited", "online", "solver_ok", "torque_balanced", "finite",
-                               "a2_positive")
-                   if not entry["flags"][k]]
-        entry["not_converged_reason"] = ", ".join(f"not {r}" for r in reasons) or \
-            "a2_hat did not settle within the band"
+    if ident is not None:
+        entry["identification"] = {
+            "se_a1": _num(ident.se_a1), "se_a2": _num(ident.se_a2),
+            "relative_ci_percent": _num(100 * ident.relative_ci), "condition": _num(ident.condition),
+            "t_m_offset_pu": _num(ident.t_m_offset_pu), "output_error": bool(ident.output_error),
+            "governor_gain_error": _num(ident.governor_gain_error), "samples": int(ident.samples)}
+    if verdict is not None:
+        word, keys = describe(verdict)
+        entry["verdict"] = word
+        entry["reasons"] = {k: REASONS[k] for k in keys}
+    else:
+        entry["verdict"] = "identified" if online["converged"] else "not identified"
+        entry["reasons"] = {} if online["converged"] else \
+            {"drem_not_converged": online["not_converged_reason"]}
     return entry
 
 
@@ -80,8 +122,8 @@ def write_summary(path: Path, entries: list[dict], extra: dict | None = None) ->
     Path(path).write_text(json.dumps(data, indent=2) + "\n")
 
 
-def write_estimates_csv(path: Path, est: Estimate) -> None:
-    cols = [np.asarray(get(est)) for get in CSV_COLUMNS.values()]
+def write_estimates_csv(path: Path, est: Estimate, rep: Replay | None = None) -> None:
+    cols = [np.asarray(get(est, rep)) for get in CSV_COLUMNS.values()]
     with open(path, "w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(CSV_COLUMNS.keys())
@@ -90,51 +132,67 @@ def write_estimates_csv(path: Path, est: Estimate) -> None:
 
 
 def format_table(entries: list[dict]) -> str:
-    """A text table in the style of the paper's Tables II and III."""
+    """A text table: H with its 95 % interval and the verdict, the online estimate, the playback."""
     w = max([10] + [len(e["name"]) for e in entries])
-    head = (f"{'recording':<{w}} {'a2 ref':>8} {'a2 est':>8} {'err %':>7} {'H s':>6} "
-            f"{'conv s':>7} {'x2 obs':>7} {'x2 sim':>7} {'I_t':>6} {'P_t':>6} {'Q_t':>6}")
-    lines = [head, "-" * len(head)]
 
     def f(x, fmt):
         return format(x, fmt) if x is not None else "n/a"
 
+    head = (f"{'recording':<{w}} {'H s':>7} {'95 % interval':>16} {'D':>7} {'verdict':<17} "
+            f"{'H online':>8} {'I_t %':>6} {'P_t %':>6} {'H ref':>6}  reasons")
+    lines = [head, "-" * len(head)]
     for e in entries:
+        ci = e.get("H_ci95")
+        ci_txt = "n/a" if not ci or ci[0] is None else \
+            f"{ci[0]:.2f}-{'inf' if ci[1] is None else format(ci[1], '.2f')}"
         s = e["smape_percent"]
+        reasons = ", ".join(k.replace("_", " ") for k in e.get("reasons", {})
+                            if k not in ("drem_not_converged", "drem_disagrees"))
         lines.append(
-            f"{e['name']:<{w}} {f(e['a2_reference'], '8.2f'):>8} {f(e['a2'], '8.2f'):>8} "
-            f"{f(e['a2_error_percent'], '7.2f'):>7} {f(e['H_s'], '6.2f'):>6} "
-            f"{f(e['convergence_time_s'], '7.1f'):>7} {f(s['x2_observer'], '7.2f'):>7} "
-            f"{f(s['x2_playback'], '7.2f'):>7} {f(s['I_t'], '6.2f'):>6} {f(s['P_t'], '6.2f'):>6} "
-            f"{f(s['Q_t'], '6.2f'):>6}")
-    lines.append("a2 in rad/s^2 per pu; x2 obs/sim, I_t, P_t, Q_t: sMAPE in % (paper Eq. 23).")
+            f"{e['name']:<{w}} {f(e['H_s'], '7.2f'):>7} {ci_txt:>16} {f(e['D'], '7.3f'):>7} "
+            f"{e['verdict']:<17} {f(e['online']['H_s'], '8.2f'):>8} {f(s['I_t'], '6.2f'):>6} "
+            f"{f(s['P_t'], '6.2f'):>6} {f(e['H_reference_s'], '6.2f'):>6}  {reasons}")
+    lines.append("H in s (machine base), 95 % interval from the batch identification; H online: the "
+                 "paper's DREM/I&I; I_t, P_t: playback sMAPE (paper Eq. 23).")
     return "\n".join(lines)
 
 
-def plot_estimates(est: Estimate, name: str, out_dir: Path, a1_reference=None,
-                   a2_reference=None) -> list[Path]:
-    """Figures like the paper's Figs. 5-8: convergence, x2, playback errors. Returns the paths."""
+def plot_estimates(est: Estimate, name: str, out_dir: Path, a1_reference=None, a2_reference=None,
+                   ident: Identified | None = None, rep: Replay | None = None,
+                   status: str | None = None) -> list[Path]:
+    """Figures like the paper's Figs. 5-8: convergence, x2, playback. Returns the paths.
+
+    ``status`` (the verdict and its main reason) goes into every title, so that a figure of a
+    failed or unidentified unit says so.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     t = np.asarray(est.time_s)
+    tag = f" — {status}" if status else ""
     paths = []
 
     fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
-    for ax, traj, ref, label in ((axes[0], est.a1_hat, a1_reference, "a1 [1/s]"),
-                                 (axes[1], est.a2_hat, a2_reference, "a2 [rad/s² per pu]")):
-        ax.plot(t, np.asarray(traj), label="estimate")
+    for ax, traj, ref, label, k in ((axes[0], est.a1_hat, a1_reference, "a1 [1/s]", 0),
+                                    (axes[1], est.a2_hat, a2_reference, "a2 [rad/s² per pu]", 1)):
+        ax.plot(t, np.asarray(traj), label="online estimate (DREM)")
+        if ident is not None:
+            value = float(ident.a1 if k == 0 else ident.a2)
+            se = float(ident.se_a1 if k == 0 else ident.se_a2)
+            ax.axhline(value, color="tab:red", lw=1.2, label="batch identification")
+            ax.axhspan(value - 1.96 * se, value + 1.96 * se, color="tab:red", alpha=0.15,
+                       label="95 % interval")
         if ref is not None:
             ax.axhline(float(ref), color="k", ls="--", label="reference")
         ax.set_ylabel(label)
-        ax.legend(loc="best")
+        ax.legend(loc="best", fontsize=8)
         ax.grid(alpha=0.3)
     if bool(est.converged):
         axes[1].axvline(float(est.convergence_time_s), color="g", ls=":", label="converged")
     axes[1].set_xlabel("time [s]")
-    fig.suptitle(f"DREM parameter estimates — {name}")
+    fig.suptitle(f"Parameter estimates — {name}{tag}", fontsize=10)
     paths.append(_save(fig, out_dir / f"convergence_{name}.png"))
 
     tr = est.trajectories
@@ -142,29 +200,43 @@ def plot_estimates(est: Estimate, name: str, out_dir: Path, a1_reference=None,
     axes[0].plot(t, np.asarray(tr.x2_meas_rad_s), label="measured", lw=0.8)
     axes[0].plot(t, np.asarray(tr.x2_hat_rad_s), label="I&I observer", lw=0.8)
     axes[0].set_ylabel("x2 [rad/s]")
-    axes[0].legend(loc="best")
+    axes[0].legend(loc="best", fontsize=8)
     axes[1].plot(t, np.asarray(tr.x2_hat_rad_s - tr.x2_meas_rad_s), lw=0.8)
     axes[1].set_ylabel("x2 error [rad/s]")
     axes[1].set_xlabel("time [s]")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.suptitle(f"Speed deviation x2, observer vs measurement — {name}")
+    fig.suptitle(f"Speed deviation x2, observer vs measurement — {name}{tag}", fontsize=10)
     paths.append(_save(fig, out_dir / f"x2_{name}.png"))
 
+    pb = _playback(est, rep)
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 8))
-    pb = tr.playback
-    errs = ((pb.x2_rad_s - tr.x2_meas_rad_s, "x2 error [rad/s]"),
-            (pb.i_t_pu - tr.i_t_pu, "I_t error [pu]"),
-            (pb.p_t_pu - tr.p_t_pu, "P_t error [pu]"),
-            (pb.q_t_pu - tr.q_t_pu, "Q_t error [pu]"))
-    for ax, (e, label) in zip(axes, errs):
-        ax.plot(t, np.asarray(e), lw=0.8)
+    pairs = ((tr.x2_meas_rad_s, pb.x2_rad_s, "x2 [rad/s]"), (tr.i_t_pu, pb.i_t_pu, "I_t [pu]"),
+             (tr.p_t_pu, pb.p_t_pu, "P_t [pu]"), (tr.q_t_pu, pb.q_t_pu, "Q_t [pu]"))
+    for ax, (meas, sim, label) in zip(axes, pairs):
+        ax.plot(t, np.asarray(meas), lw=0.8, label="measured")
+        ax.plot(t, np.asarray(sim), lw=0.8, label="playback")
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
+        _limit_to_measurement(ax, np.asarray(meas), np.asarray(sim))
+    axes[0].legend(loc="best", fontsize=8)
     axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"Event playback minus measurement — {name}")
+    which = "identified" if rep is not None else "online"
+    fig.suptitle(f"Event playback with the {which} H, D vs measurement — {name}{tag}", fontsize=10)
     paths.append(_save(fig, out_dir / f"playback_{name}.png"))
     return paths
+
+
+def _limit_to_measurement(ax, meas, sim):
+    """Keep the measurement readable when the playback runs away (the title says it diverged)."""
+    fin = meas[np.isfinite(meas)]
+    if not fin.size:
+        return
+    lo, hi = float(fin.min()), float(fin.max())
+    pad = 0.5 * max(hi - lo, 1e-6 * max(abs(hi), 1.0))
+    sim_f = sim[np.isfinite(sim)]
+    if sim_f.size and (sim_f.min() < lo - 4 * pad or sim_f.max() > hi + 4 * pad):
+        ax.set_ylim(lo - 4 * pad, hi + 4 * pad)
 
 
 def _save(fig, path: Path) -> Path:

@@ -13,53 +13,135 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._core.estimate import estimate
-from .._io.config import RunConfig
+from .._core.recording import Recording
+from .._core.settings import Settings
+from .._core.verdict import NOTES, assess
+from .._io.config import GeneratorRun, RunConfig
 from .._io.errors import InputError
 from .._io.measurement import read_measurement
-from .._many.batch import estimate_batch
+from .._many.batch import estimate_batch, pad_recording, select, stack
 from .._many.sweep import sweep_configs
 from .._many.tune import TUNABLE, TUNE_SETTINGS, config_values, tune
+from .._version import __version__
 from .progress import Progress
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
 
-_estimate = eqx.filter_jit(estimate)  # one compile per recording length, kept across runs
+BUCKETS_PER_OCTAVE = 4
+"""Recording lengths are padded up to one of 4 sizes per doubling (at most 19 % padding), so
+that the generators of a config share a few compiled shapes."""
+
+
+@dataclasses.dataclass
+class Unit:
+    """One recording segment of one generator."""
+
+    name: str
+    gen: GeneratorRun
+    t0: float
+    recording: Recording
+    quality: dict
+
+
+def bucket(n: int, minimum: int = 256) -> int:
+    """The padded length for ``n`` samples: the next of 4 sizes per octave (>= ``minimum``)."""
+    size = max(n, minimum)
+    octave = 1 << (size - 1).bit_length() - 1
+    for k in range(BUCKETS_PER_OCTAVE, 2 * BUCKETS_PER_OCTAVE + 1):
+        if size <= octave * k // BUCKETS_PER_OCTAVE:
+            return octave * k // BUCKETS_PER_OCTAVE
+    return 2 * octave
+
+
+def _group_key(u: Unit):
+    return (bucket(int(np.shape(u.recording.t_s)[0])), u.recording.location,
+            jax.tree_util.tree_structure(u.gen.plant))
+
+
+_assess = eqx.filter_jit(jax.vmap(assess, in_axes=(0, 0, 0, None, None, None, None)))
+"""Identification, replay with the identified parameters and verdict, vmapped over a group."""
 
 
 def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:
     """Estimate every generator of ``cfg``; write summary.json, CSVs and figures; return the summary.
 
-    Raises :class:`InputError` for bad input (before any output is written).
+    The online estimator runs first (one batched call per group of recordings that share a
+    padded length, a PMU location and a plant structure), then the batch identification,
+    the playback with the identified H, D and the verdict. Raises :class:`InputError` for bad
+    input (before any output is written). Units that are not ``identified`` get a one-line
+    warning on ``stream``.
     """
     out_dir = Path(out_dir) if out_dir is not None else cfg.out_dir
     t_start = time.perf_counter()
-    progress = Progress(2 * len(cfg.generators), stream)
-    loaded = []
+    units = []
     for g in cfg.generators:
-        segments, quality = read_measurement(g.measurement, float(g.plant.machine.s_rated_mva))
-        loaded.append((g, segments, quality))
-        progress.step(f"read {g.name} ({quality['rows_read']} rows, {len(segments)} segment(s))")
+        segments, quality = read_measurement(g.measurement, g.plant.machine)
+        for k, (t0, rec) in enumerate(segments):
+            units.append(Unit(g.name if len(segments) == 1 else f"{g.name}_part{k + 1}", g, t0, rec,
+                              quality))
+    groups: dict = {}
+    for u in units:
+        groups.setdefault(_group_key(u), []).append(u)
+    progress = Progress(len(cfg.generators) + 2 * len(groups) + len(units), stream)
+    for g in cfg.generators:
+        progress.step(f"read {g.name}")
+    # With identification, the playback shown is the identified one (replay): the online
+    # estimator's own playback is not run.
+    settings = dataclasses.replace(cfg.settings, keep="trajectories", playback=cfg.identify is None)
+    results = {}
+    for (size, _, _), members in groups.items():
+        recs = stack([pad_recording(u.recording, size, with_frequency=True) for u in members])
+        plants = stack([u.gen.plant for u in members])
+        refs = np.array([np.nan if u.gen.a2_reference is None else u.gen.a2_reference for u in members])
+        est = estimate_batch(recs, plants, cfg.observer, settings, None, refs)
+        progress.step(f"online estimate of {len(members)} recording(s) of {size} samples")
+        assessed = None
+        if cfg.identify is not None:
+            online = eqx.tree_at(lambda e: e.trajectories, est, None)
+            assessed = jax.tree_util.tree_map(np.asarray, _assess(
+                recs, plants, online, cfg.observer, settings, cfg.identify, cfg.verdict))
+        progress.step(f"identification of {len(members)} recording(s)")
+        for k, u in enumerate(members):
+            results[u.name] = (est, assessed, k)
 
     out_dir.mkdir(parents=True, exist_ok=True)
-    entries = []
-    for g, segments, quality in loaded:
-        for k, (t0, rec) in enumerate(segments):
-            name = g.name if len(segments) == 1 else f"{g.name}_part{k + 1}"
-            est = _estimate(rec, g.plant, cfg.observer, cfg.settings, None, g.a2_reference)
-            est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + t0)
-            entry = summary_entry(name, est, a2_reference=g.a2_reference,
-                                  h_reference_s=g.h_reference_s)
-            entries.append({"name": name, "role": g.role, "generator": g.name, **entry,
-                            "segment_start_s": t0, "data_quality": quality})
-            if cfg.trajectories:
-                write_estimates_csv(out_dir / f"estimates_{name}.csv", est)
-            if cfg.figures:
-                plot_estimates(est, name, out_dir, a2_reference=g.a2_reference)
-        progress.step(f"estimated and wrote {g.name}")
-
+    entries, inputs = [], {}
+    for u in units:
+        est_b, assessed, k = results[u.name]
+        n = int(np.shape(u.recording.t_s)[0])
+        est = _cut(select(est_b, k), n)
+        est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + u.t0)
+        ident = rep = verd = None
+        if assessed is not None:
+            ident, rep, verd = (select(x, k) for x in assessed)
+            rep = eqx.tree_at(lambda r: r.playback, rep, _cut(rep.playback, n))
+        entry = summary_entry(u.name, est, ident, rep, verd, a2_reference=u.gen.a2_reference,
+                              h_reference_s=u.gen.h_reference_s)
+        entries.append({"name": u.name, "role": u.gen.role, "generator": u.gen.name, **entry,
+                        "segment_start_s": u.t0, "data_quality": u.quality})
+        for f in u.gen.measurement.file:
+            inputs.setdefault(f, None)
+        decisive = [k for k in entry["reasons"] if k not in NOTES]
+        status = entry["verdict"] if not decisive else f"{entry['verdict']}: {decisive[0].replace('_', ' ')}"
+        if entry["verdict"] != "identified":
+            why = "; ".join(v for k, v in entry["reasons"].items() if k not in NOTES) or "see summary.json"
+            print(f"jaxdse: warning: {u.name}: {entry['verdict']}: {why}", file=stream)
+        if cfg.trajectories:
+            write_estimates_csv(out_dir / f"estimates_{u.name}.csv", est, rep)
+        if cfg.figures:
+            plot_estimates(est, u.name, out_dir, a2_reference=u.gen.a2_reference, ident=ident, rep=rep,
+                           status=status)
+        progress.step(f"wrote {u.name}")
     summary = {
         "source": f"jaxdse run {cfg.path}",
-        "observer": {k: float(getattr(cfg.observer, k)) for k in cfg.observer.__dataclass_fields__},
+        "jaxdse_version": __version__,
+        "config": {"file": str(cfg.path), "sha256": sha256(cfg.path)},
+        "inputs": [{"file": f, "sha256": sha256(Path(f))} for f in inputs],
+        "observer": module_values(cfg.observer),
+        "settings": settings_values(cfg.settings),
+        "identify": None if cfg.identify is None else module_values(cfg.identify),
+        "verdict_thresholds": module_values(cfg.verdict),
+        "plants": {g.name: {**module_values(g.plant), "defaults_used": list(g.defaults_used)}
+                   for g in cfg.generators},
         "wall_time_s": round(time.perf_counter() - t_start, 2),
     }
     write_summary(out_dir / "summary.json", entries, summary)
@@ -71,9 +153,54 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
     return {"recordings": entries, **summary}
 
 
+def _cut(tree, n: int):
+    """The first ``n`` samples of every per-sample array of a padded result."""
+    return jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) >= 1 and np.shape(x)[0] >= n and
+                                  np.shape(x)[0] > 4 else x, tree)
+
+
+def sha256(path: Path) -> str | None:
+    """Hex SHA-256 of a file (None when it cannot be read)."""
+    import hashlib
+
+    try:
+        with open(path, "rb") as fh:
+            return hashlib.file_digest(fh, "sha256").hexdigest()
+    except OSError:
+        return None
+
+
+def module_values(module) -> dict:
+    """An eqx.Module as JSON-ready values: array leaves as numbers, sub-modules as dicts, the
+    class name as "model"."""
+    out = {"model": type(module).__name__}
+    for f in dataclasses.fields(module):
+        v = getattr(module, f.name)
+        if isinstance(v, eqx.Module):
+            out[f.name] = module_values(v)
+        elif v is None or isinstance(v, bool | int | str):
+            out[f.name] = v
+        elif isinstance(v, float):
+            out[f.name] = v
+        else:
+            try:
+                out[f.name] = float(np.asarray(v))
+            except (TypeError, ValueError):
+                out[f.name] = str(v)
+    return out
+
+
+def settings_values(settings: Settings) -> dict:
+    values = module_values(settings)
+    for k in ("observer_integrator", "playback_integrator"):
+        integ = getattr(settings, k)
+        values[k] = {"solver": type(integ.solver).__name__, "adaptive": integ.adaptive,
+                     "rtol": integ.rtol, "atol": integ.atol, "substeps": integ.substeps}
+    return values
+
 
 def _first_segment(g, stream):
-    segments, _ = read_measurement(g.measurement, float(g.plant.machine.s_rated_mva))
+    segments, _ = read_measurement(g.measurement, g.plant.machine)
     if len(segments) > 1:
         print(f"[jaxdse] {g.name}: {len(segments)} segments; using the first "
               f"({segments[0][1].t_s.shape[0]} samples)", file=stream)
@@ -118,14 +245,13 @@ def run_sweep(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) ->
     return rows
 
 
-def _same_plant(a, b) -> bool:
-    la, ta = jax.tree_util.tree_flatten(a)
-    lb, tb = jax.tree_util.tree_flatten(b)
-    return ta == tb and all(np.array_equal(x, y) for x, y in zip(la, lb))
-
-
 def run_tune(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:
-    """``jaxdse tune``: tune on role "auto" generators, score held-out role "cross" ones."""
+    """``jaxdse tune``: tune on role "auto" generators, score held-out role "cross" ones.
+
+    Each generator keeps its own plant (vmapped). The tuned values are recommended only if
+    they lower the held-out loss (the training loss when nothing is held out); otherwise
+    tuned_observer.toml keeps the start (paper Table I or the config's [observer]) and says why.
+    Raises FloatingPointError if a loss is not finite (the CLI exits 1)."""
     out_dir = Path(out_dir) if out_dir is not None else cfg.out_dir
     tn = cfg.tune or {}
     train = [g for g in cfg.generators if g.role == "auto"]
@@ -133,9 +259,6 @@ def run_tune(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> 
     if not train:
         raise InputError(cfg.path, "jaxdse tune needs at least one [[generator]] with role = 'auto'",
                          key="generator")
-    if not all(_same_plant(g.plant, train[0].plant) for g in train + held):
-        raise InputError(cfg.path, "jaxdse tune needs one plant for all generators "
-                         "(per-generator plant overrides are not supported)", key="generator")
 
     def truths(gs):
         refs = [g.a2_reference for g in gs]
@@ -144,27 +267,40 @@ def run_tune(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> 
     bar = Progress(tn.get("max_steps", 30), stream)
     kwargs = {k: tn[k] for k in ("max_steps", "max_factor", "autodiff", "weights") if k in tn}
     t0 = time.perf_counter()
-    res = tune([_first_segment(g, stream) for g in train], train[0].plant, cfg.observer, truths(train),
-               heldout=[_first_segment(g, stream) for g in held], heldout_a2_true=truths(held),
+    res = tune([_first_segment(g, stream) for g in train], [g.plant for g in train], cfg.observer,
+               truths(train), heldout=[_first_segment(g, stream) for g in held],
+               heldout_a2_true=truths(held), heldout_plant=[g.plant for g in held] or None,
                names=tn.get("parameters", TUNABLE), settings=dataclasses.replace(
                    TUNE_SETTINGS, derivative_half_width=cfg.settings.derivative_half_width,
                    qss_window_s=cfg.settings.qss_window_s),
                progress=lambda k, f: bar.step(f"step {k}: loss {f:.5g}"), **kwargs)
-    values = config_values(res.config, list(cfg.observer.__dataclass_fields__))
+    names = list(cfg.observer.__dataclass_fields__)
+    tuned = config_values(res.config, names)
+    start = config_values(cfg.observer, names)
+    judged_on = "held-out" if held else "training"
     summary = {"source": f"jaxdse tune {cfg.path}", "train": [g.name for g in train],
                "heldout": [g.name for g in held], "steps": res.steps,
                "loss_start": res.loss_start, "loss_tuned": res.loss_tuned,
                "heldout_loss_start": res.heldout_loss_start, "heldout_loss_tuned": res.heldout_loss_tuned,
-               "history": list(res.history), "observer_start": config_values(cfg.observer, list(values)),
-               "observer_tuned": values, "wall_time_s": round(time.perf_counter() - t0, 1)}
+               "improved": res.improved, "judged_on": judged_on,
+               "history": list(res.history), "observer_start": start,
+               "observer_tuned": tuned, "observer_recommended": tuned if res.improved else start,
+               "wall_time_s": round(time.perf_counter() - t0, 1)}
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "tune.json").write_text(json.dumps(summary, indent=2))
-    (out_dir / "tuned_observer.toml").write_text(
-        f"# jaxdse tune {cfg.path.name}: training loss {res.loss_start:.5g} -> {res.loss_tuned:.5g}\n"
-        "[observer]\n" + "".join(f"{k} = {v!r}\n" for k, v in values.items()))
     held_txt = ("" if res.heldout_loss_start is None else
                 f"; held-out loss {res.heldout_loss_start:.5g} -> {res.heldout_loss_tuned:.5g}")
-    print(f"[jaxdse] training loss {res.loss_start:.5g} -> {res.loss_tuned:.5g}{held_txt}; wrote "
-          f"{out_dir}/tune.json and tuned_observer.toml (paste its [observer] into your config)",
-          file=stream)
+    losses = f"training loss {res.loss_start:.5g} -> {res.loss_tuned:.5g}{held_txt}"
+    if res.improved:
+        header = f"# jaxdse tune {cfg.path.name}: {losses}\n"
+        advice = "paste its [observer] into your config"
+    else:
+        header = (f"# jaxdse tune {cfg.path.name}: {losses}\n# the {judged_on} loss got worse: "
+                  "these are the START values, unchanged (tune.json keeps the tuned ones)\n")
+        advice = (f"the {judged_on} loss got WORSE, so it keeps the start values: "
+                  "do not use the tuned ones")
+    (out_dir / "tuned_observer.toml").write_text(
+        header + "[observer]\n"
+        + "".join(f"{k} = {v!r}\n" for k, v in summary["observer_recommended"].items()))
+    print(f"[jaxdse] {losses}; wrote {out_dir}/tune.json and tuned_observer.toml ({advice})", file=stream)
     return summary

@@ -186,6 +186,15 @@ def _vector_field(external_tm: bool):
     return rhs
 
 
+def _theta_rate(t, s: DremState, u: DremInputs, args):
+    """The linear decay rate of each state: gamma_j K_j Delta^2 for theta, zero elsewhere."""
+    cfg = args[0]
+    reg = regression(s, cfg)
+    rate = jnp.stack([cfg.gamma1, cfg.gamma2]) * reg.k_gamma * reg.delta_det**2
+    zero = jtu.tree_map(jnp.zeros_like, s)
+    return zero._replace(theta=rate)
+
+
 class DremTrajectory(eqx.Module):
     """Observer output at every sample."""
 
@@ -292,7 +301,7 @@ def run_observer(ts, inputs: DremInputs, x2_0, t_ref, cfg: ObserverConfig, gov: 
 
     out = integrate_sampled(field, y0, ts, inputs, args, integ, n_valid=n_valid, previous=previous,
                             reduce=None if save_trajectory else summarise,
-                            aux=None if save_trajectory else x2_meas, block=block)
+                            aux=None if save_trajectory else x2_meas, block=block, rate=_theta_rate)
     if not save_trajectory:
         return ObserverSolution(segments=out.ys, last=out.y_last, ok=out.ok, num_steps=out.num_steps,
                                 trajectory=None)

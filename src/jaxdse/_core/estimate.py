@@ -6,14 +6,19 @@ governor Tm -> DREM/I&I observer -> Ef estimate and event playback -> metrics.
 
 from __future__ import annotations
 
+import dataclasses
+
+import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array
 
 from .drem import DremInputs, ObserverConfig, run_observer
 from .front_end import front_end, front_sums, playback_inputs, reference_torque
+from .governor import ScaledGovernor
 from .plant import Plant
-from .playback import playback
+from .playback import Playback, playback
 from .recording import Recording
-from .result import Estimate, Trajectories, build_estimate
+from .result import Estimate, Scores, Trajectories, build_estimate
 from .settings import Settings
 
 
@@ -79,6 +84,53 @@ def external_torque(t_m, ts, settings: Settings):
     return jnp.asarray(t_m, dtype=ts.dtype)
 
 
+def scaled_governor(plant: Plant, t_ref, dw0, gain, offset) -> Plant:
+    """``plant`` with its governor's response scaled by 1 + ``gain`` about its initial torque
+    and shifted by ``offset`` [pu]."""
+    gov = plant.governor
+    t_m0 = gov.torque(gov.steady_state(t_ref, dw0), dw0)
+    return eqx.tree_at(lambda p: p.governor, plant, ScaledGovernor(gov, gain, t_m0, offset))
+
+
 def playback_governor(plant: Plant, settings: Settings):
     """The governor the playback integrates (None: it uses the external Tm)."""
     return None if settings.external_tm else plant.governor
+
+
+class Replay(eqx.Module):
+    """The event playback with given parameters: scores against the measurements, trajectory."""
+
+    smape: Scores
+    """sMAPE [%] of the playback's x2, I_t, P_t, Q_t (``x2_observer`` is NaN: no observer runs)."""
+    playback: Playback
+    ok: Array
+
+
+def replay(recording: Recording, plant: Plant, a1, a2, settings: Settings = Settings(),
+           t_m_offset=0.0, governor_gain_error=0.0) -> Replay:
+    """Play the event back with a1, a2 (e.g. those of :func:`jaxdse.identify`) and score it.
+
+    The governor is ``plant.governor`` at its quasi-steady-state T_ref, its torque response
+    scaled by 1 + ``governor_gain_error`` and shifted by ``t_m_offset`` [pu]
+    (:class:`~jaxdse.ScaledGovernor`, as :func:`jaxdse.identify` fits them).
+    """
+    ts = recording.t_s
+    dt = ts[1] - ts[0]
+    fe = front_end(recording, plant, settings)
+    t_ref = reference_torque(ts, fe, plant.governor, settings)
+    plant = scaled_governor(plant, t_ref, fe.dw[0], governor_gain_error, t_m_offset)
+    pb_in, y0, measured = playback_inputs(fe, None, fe.alg.delta_rad[0], t_ref, plant,
+                                          dataclasses.replace(settings, external_tm=False), dt)
+    pb = playback(ts, pb_in, y0, a1, a2, plant.machine, settings.playback_integrator, plant.governor,
+                  t_ref, measured=measured, n_valid=fe.n, block=settings.block_samples,
+                  save_trajectory=True)
+    count = jnp.maximum(jnp.sum(fe.valid), 1)
+
+    def score(s):
+        return 100.0 * jnp.sum(s) / count
+
+    nan = jnp.full((), jnp.nan, dtype=ts.dtype)
+    seg = pb.segments
+    return Replay(smape=Scores(x2_observer=nan, x2_playback=score(seg.x2), i_t=score(seg.i_t),
+                               p_t=score(seg.p_t), q_t=score(seg.q_t)),
+                  playback=pb.trajectory, ok=pb.ok)

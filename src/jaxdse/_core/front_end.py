@@ -35,6 +35,8 @@ class StreamContext(NamedTuple):
     """Unwrapped delta - theta_ref at the first sample."""
     theta_t0: Array
     """Unwrapped terminal-voltage angle at the first sample."""
+    q_state0: Array | None = None
+    """q-axis rotor states at the first sample (``Machine.q_axis`` only)."""
 
 
 class FrontEnd(NamedTuple):
@@ -55,6 +57,8 @@ class FrontEnd(NamedTuple):
     alg: AlgebraicStates
     x2_meas: Array
     """Measured speed deviation [rad/s] (paper Remark 2)."""
+    f_hz: Array
+    """Frequency of the measured bus [Hz]: the channel, or derived from its voltage angle."""
     dw: Array
     """x2_meas / w_s [pu], the governor input."""
 
@@ -79,7 +83,7 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     mapped = map_to_terminal(v_meas, i_meas, plant.line, plant.transformer, plant.aux,
                              recording.location, ctx.p_lv_sum, ctx.p_lv_count)
     i_t = mapped.i_sg * plant.current_scale
-    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0)
+    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0)
     f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
     if recording.f_hz is not None:  # the channel where it has a value, else the derived one
         f_hz = jnp.where(jnp.isnan(recording.f_hz), f_hz, recording.f_hz)
@@ -87,7 +91,7 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     theta_t = theta_ref + unwrap_continuing(jnp.angle(mapped.v_t), None if context is None
                                             else ctx.theta_t0 - theta_ref[0])
     return FrontEnd(n=n, valid=jnp.arange(ts.shape[0]) < n, theta_ref=theta_ref, theta_t=theta_t,
-                    v_t=mapped.v_t, i_t=i_t, p_lv=mapped.p_lv, alg=alg, x2_meas=x2_meas,
+                    v_t=mapped.v_t, i_t=i_t, p_lv=mapped.p_lv, alg=alg, x2_meas=x2_meas, f_hz=f_hz,
                     dw=x2_meas / m.omega_s)
 
 

@@ -1,9 +1,27 @@
 """Governor-turbine models giving the mechanical torque Tm from a speed signal.
 
 The paper uses 50Hertz's in-house power-control governor (its Fig. 2), which is not
-published; jaxdse ships the standard PSS/E TGOV1 steam governor-turbine (Siemens PTI,
-*PSS/E Model Library*, "TGOV1"; also IEEE PES-TR1, 2013). New models subclass
-:class:`AbstractGovernor`.
+published; jaxdse ships the standard PSS/E models TGOV1 (steam), IEEEG1 (IEEE type 1
+steam), GAST (gas turbine), HYGOV (hydro) and GGOV1 (general purpose) (Siemens PTI, *PSS/E
+Model Library*; IEEE PES-TR1, 2013). New models subclass :class:`AbstractGovernor`.
+
+Conventions of every model but TGOV1 (PSS/E behaviour):
+
+* ``t_ref`` is the model's own reference input, as PSS/E names it: the load reference
+  (IEEEG1 ``Po``, GAST and GGOV1 ``Pref``) or, for HYGOV, the speed reference ``Nref``;
+  ``reference_from_steady`` finds it from the steady Tm. Speed deviations are in pu of
+  nominal speed (``dw = x2 / w_s``); powers equal torques in pu.
+* a first-order lag ``1/(1 + sT)`` with ``T = 0`` is a pass-through; a lead-lag
+  ``(1 + sTa)/(1 + sTb)`` with ``Tb = 0`` is a pass-through. The state of a bypassed block
+  is kept (zero derivative), so that one state layout serves every parameter set under vmap.
+* non-windup limits block the derivative that would push a state further out (as TGOV1);
+  downstream blocks see the state clipped to its limits.
+* no Python branching on array values: ``jnp.where`` everywhere, with the denominators of
+  bypassed blocks replaced by 1 so that neither value nor gradient is NaN.
+
+Sources: Siemens PTI *PSS(R)E Model Library* (each model); IEEE PES-TR1 (2013); for the
+structure only, the BSD-3 implementations PowerSimulationsDynamics.jl (GAST, HYGOV) and
+OpenIPSL (IEEEG1, GAST, HYGOV, GGOV1), and PowerWorld's GGOV1 notes.
 """
 
 from __future__ import annotations
@@ -12,9 +30,10 @@ import abc
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
-from .fields import as_float, check_nonnegative, check_positive
+from .fields import as_float, check_nonnegative, check_positive, concrete
 
 
 class AbstractGovernor(eqx.Module):
@@ -35,6 +54,50 @@ class AbstractGovernor(eqx.Module):
     @abc.abstractmethod
     def reference_from_steady(self, t_m, dw):
         """Torque reference T_ref that holds Tm = ``t_m`` at speed deviation ``dw`` in steady state."""
+
+
+# --- block helpers ----------------------------------------------------------------------------
+
+def _safe(t):
+    """A denominator that is ``t`` where ``t > 0`` and 1 elsewhere (bypassed blocks)."""
+    return jnp.where(t > 0, t, 1.0)
+
+
+def _lag(u, x, t):
+    """First-order lag 1/(1 + sT): (output, dx/dt). T = 0: pass-through, dx/dt = 0."""
+    on = t > 0
+    return jnp.where(on, x, u), jnp.where(on, (u - x) / _safe(t), 0.0)
+
+
+def _lead_lag(u, x, t_lead, t_lag):
+    """(1 + s t_lead)/(1 + s t_lag): (output, dx/dt). t_lag = 0: pass-through."""
+    on = t_lag > 0
+    ts = _safe(t_lag)
+    return (jnp.where(on, x + (t_lead / ts) * (u - x), u),
+            jnp.where(on, (u - x) / ts, 0.0))
+
+
+def _washout(u, x, t):
+    """s/(1 + sT) (a filtered derivative): (output, dx/dt). T = 0: output 0 (not realisable)."""
+    on = t > 0
+    d = jnp.where(on, (u - x) / _safe(t), 0.0)
+    return d, d
+
+
+def _blocked(x, dx, lo, hi):
+    """TGOV1's non-windup rule: no motion beyond a limit the state sits on."""
+    return jnp.where(((x >= hi) & (dx > 0)) | ((x <= lo) & (dx < 0)), 0.0, dx)
+
+
+def _check(module, ok: bool | np.ndarray, message: str) -> None:
+    """ValueError for a concrete parameter combination that is invalid (tracers pass)."""
+    if concrete(ok) and not bool(np.all(np.asarray(ok))):
+        raise ValueError(f"{type(module).__name__}: {message}")
+
+
+def _concrete(*values) -> bool:
+    return all(concrete(v) for v in values)
+
 
 
 class TGOV1(AbstractGovernor):
@@ -69,8 +132,7 @@ class TGOV1(AbstractGovernor):
     def vector_field(self, state, dw, t_ref):
         valve, lag = state[0], state[1]
         d_valve = (t_ref - dw / self.r_pu - valve) / self.t1_s
-        blocked = ((valve >= self.v_max_pu) & (d_valve > 0)) | ((valve <= self.v_min_pu) & (d_valve < 0))
-        return jnp.stack([jnp.where(blocked, 0.0, d_valve), (valve - lag) / self.t3_s])
+        return jnp.stack([_blocked(valve, d_valve, self.v_min_pu, self.v_max_pu), (valve - lag) / self.t3_s])
 
     def torque(self, state, dw):
         valve, lag = state[0], state[1]
@@ -78,3 +140,622 @@ class TGOV1(AbstractGovernor):
 
     def reference_from_steady(self, t_m, dw):
         return t_m + (1.0 / self.r_pu + self.dt_pu) * dw
+
+
+HEAD_GATE_FLOOR = 1e-4
+"""HYGOV: the gate opening in the head equation h = (q/g)^2 is floored at this value [pu]."""
+
+
+# --- IEEEG1 -----------------------------------------------------------------------------------
+
+class IEEEG1(AbstractGovernor):
+    """PSS/E IEEEG1, the IEEE type 1 steam turbine-governor (single-shaft use).
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "IEEEG1"; IEEE PES-TR1 2013, Fig. 2-2;
+    IEEE Committee Report 1973/1991):
+
+        LL   = K (1 + s T2)/(1 + s T1) dw                           (speed relay lead-lag)
+        dGV  = clip((Po - LL - GV)/T3, Uc, Uo)                      (rate limits Uc < 0 < Uo)
+        GV   = 1/s dGV, non-windup limits [PMIN, PMAX]              (valve position)
+        x4 = GV/(1 + sT4), x5 = x4/(1 + sT5), x6 = x5/(1 + sT6), x7 = x6/(1 + sT7)
+        Tm = PMECH_HP = K1 x4 + K3 x5 + K5 x6 + K7 x7
+
+    States: [LL lead-lag state, GV, x4, x5, x6, x7]. ``t_ref`` is Po.
+
+    Single shaft: the low-pressure shaft output PMECH_LP = K2 x4 + K4 x5 + K6 x6 + K8 x7 drives
+    a second machine (ICONs JBUS, M) in a cross-compound unit; for one machine it is ignored
+    (K2, K4, K6, K8 are kept as fields for the record only). For a tandem-compound unit the
+    data put all fractions in K1, K3, K5, K7 (summing to 1). T1 = 0 makes the lead-lag a gain K
+    (T2 ignored, PSS/E treats the block as bypassed); T4..T7 = 0 are pass-throughs.
+    """
+
+    k: Float[Array, ""] = eqx.field(converter=as_float, default=20.0)
+    """K: governor gain, the reciprocal of the droop [pu power / pu speed]."""
+    t1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T1: governor lag time constant [s] (0: no lead-lag)."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T2: governor lead time constant [s]."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """T3: valve positioner time constant [s] (> 0)."""
+    uo_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Uo: maximum valve opening rate [pu/s] (> 0)."""
+    uc_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-0.1)
+    """Uc: maximum valve closing rate [pu/s] (< 0)."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """PMAX: maximum valve opening [pu, machine base]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PMIN: minimum valve opening [pu, machine base]."""
+    t4_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """T4: steam bowl (inlet) time constant [s]."""
+    k1: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """K1: fraction of HP shaft power after the bowl (T4) [-]."""
+    k2: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K2: fraction of LP shaft power after T4 [-] (ignored: single shaft)."""
+    t5_s: Float[Array, ""] = eqx.field(converter=as_float, default=7.0)
+    """T5: reheater time constant [s]."""
+    k3: Float[Array, ""] = eqx.field(converter=as_float, default=0.4)
+    """K3: fraction of HP shaft power after the reheater (T5) [-]."""
+    k4: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K4: fraction of LP shaft power after T5 [-] (ignored: single shaft)."""
+    t6_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.6)
+    """T6: crossover time constant [s]."""
+    k5: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """K5: fraction of HP shaft power after T6 [-]."""
+    k6: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K6: fraction of LP shaft power after T6 [-] (ignored: single shaft)."""
+    t7_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T7: double reheat time constant [s]."""
+    k7: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K7: fraction of HP shaft power after T7 [-]."""
+    k8: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K8: fraction of LP shaft power after T7 [-] (ignored: single shaft)."""
+
+    def __check_init__(self):
+        check_positive(self, "t3_s", "uo_pu_s")
+        check_nonnegative(self, "k", "t1_s", "t2_s", "t4_s", "t5_s", "t6_s", "t7_s",
+                          "k1", "k3", "k5", "k7")
+        if _concrete(self.uc_pu_s, self.p_max_pu, self.p_min_pu, self.k1, self.k3, self.k5, self.k7):
+            _check(self, self.uc_pu_s < 0, f"Uc must be < 0, got {self.uc_pu_s}")
+            _check(self, self.p_max_pu >= self.p_min_pu,
+                   f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
+            _check(self, self.k_hp > 0, "K1 + K3 + K5 + K7 must be > 0 (single-shaft output)")
+
+    @property
+    def k_hp(self):
+        """K1 + K3 + K5 + K7: the steady-state gain from valve position to Tm."""
+        return self.k1 + self.k3 + self.k5 + self.k7
+
+    def _speed_relay(self, x_ll, dw):
+        y, d = _lead_lag(dw, x_ll, self.t2_s, self.t1_s)
+        return self.k * y, d
+
+    def _turbine(self, state):
+        gv = jnp.clip(state[1], self.p_min_pu, self.p_max_pu)
+        y4, d4 = _lag(gv, state[2], self.t4_s)
+        y5, d5 = _lag(y4, state[3], self.t5_s)
+        y6, d6 = _lag(y5, state[4], self.t6_s)
+        y7, d7 = _lag(y6, state[5], self.t7_s)
+        return (y4, y5, y6, y7), (d4, d5, d6, d7)
+
+    def steady_state(self, t_ref, dw):
+        gv = jnp.clip(t_ref - self.k * dw, self.p_min_pu, self.p_max_pu)
+        return jnp.stack([jnp.asarray(dw, float) + 0.0 * gv, gv, gv, gv, gv, gv])
+
+    def vector_field(self, state, dw, t_ref):
+        ll, d_ll = self._speed_relay(state[0], dw)
+        gv = state[1]
+        d_gv = jnp.clip((t_ref - ll - gv) / self.t3_s, self.uc_pu_s, self.uo_pu_s)
+        d_gv = _blocked(gv, d_gv, self.p_min_pu, self.p_max_pu)
+        _, (d4, d5, d6, d7) = self._turbine(state)
+        return jnp.stack([d_ll, d_gv, d4, d5, d6, d7])
+
+    def torque(self, state, dw):
+        (y4, y5, y6, y7), _ = self._turbine(state)
+        return self.k1 * y4 + self.k3 * y5 + self.k5 * y6 + self.k7 * y7
+
+    def reference_from_steady(self, t_m, dw):
+        return t_m / self.k_hp + self.k * dw
+
+
+# --- GAST -------------------------------------------------------------------------------------
+
+class GAST(AbstractGovernor):
+    """PSS/E GAST, the gas turbine-governor with a load (exhaust-temperature) limit.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "GAST"; IEEE PES-TR1 2013, Fig. 3-1;
+    same structure in PowerSimulationsDynamics.jl ``GasTG`` and OpenIPSL ``GAST``):
+
+        x_in = min(Pref - dw/R, AT + KT (AT - x3))                  (low-value select)
+        x1   = x_in/(1 + s T1), non-windup limits [VMIN, VMAX]      (fuel valve)
+        x2   = x1/(1 + s T2)                                        (fuel flow / combustion)
+        x3   = x2/(1 + s T3)                                        (exhaust temperature)
+        Tm   = x2 - DTURB dw
+
+    States: [x1, x2, x3]. ``t_ref`` is Pref. The steady state is
+    x1 = x2 = x3 = clip(min(Pref - dw/R, AT), VMIN, VMAX) (for KT >= 0 the load-limit branch
+    is AT + KT (AT - x) >= x exactly when x <= AT). T2 = 0 or T3 = 0 is a pass-through.
+    """
+
+    r_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """R: permanent droop [pu speed / pu power]."""
+    t1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.4)
+    """T1: fuel valve time constant [s] (> 0)."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """T2: fuel system (combustion) time constant [s]."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
+    """T3: load-limit (exhaust temperature measurement) time constant [s]."""
+    at_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """AT: ambient temperature load limit [pu, machine base]."""
+    kt_pu: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """KT: load-limit feedback gain [-]."""
+    v_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """VMAX: maximum fuel valve opening [pu]."""
+    v_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """VMIN: minimum fuel valve opening [pu]."""
+    dturb_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """DTURB: turbine damping [pu power / pu speed]."""
+
+    def __check_init__(self):
+        check_positive(self, "r_pu", "t1_s")
+        check_nonnegative(self, "t2_s", "t3_s", "kt_pu", "dturb_pu")
+        if _concrete(self.v_max_pu, self.v_min_pu):
+            _check(self, self.v_max_pu >= self.v_min_pu,
+                   f"VMAX ({self.v_max_pu}) must be >= VMIN ({self.v_min_pu})")
+
+    def steady_state(self, t_ref, dw):
+        x = jnp.clip(jnp.minimum(t_ref - dw / self.r_pu, self.at_pu), self.v_min_pu, self.v_max_pu)
+        return jnp.stack([x, x, x])
+
+    def vector_field(self, state, dw, t_ref):
+        x1 = state[0]
+        y2, d2 = _lag(self._valve(state), state[1], self.t2_s)
+        y3, d3 = _lag(y2, state[2], self.t3_s)
+        x_in = jnp.minimum(t_ref - dw / self.r_pu, self.at_pu + self.kt_pu * (self.at_pu - y3))
+        d1 = _blocked(x1, (x_in - x1) / self.t1_s, self.v_min_pu, self.v_max_pu)
+        return jnp.stack([d1, d2, d3])
+
+    def _valve(self, state):
+        return jnp.clip(state[0], self.v_min_pu, self.v_max_pu)
+
+    def torque(self, state, dw):
+        y2, _ = _lag(self._valve(state), state[1], self.t2_s)
+        return y2 - self.dturb_pu * dw
+
+    def reference_from_steady(self, t_m, dw):
+        return t_m + (1.0 / self.r_pu + self.dturb_pu) * dw
+
+
+# --- HYGOV ------------------------------------------------------------------------------------
+
+class HYGOV(AbstractGovernor):
+    """PSS/E HYGOV, the hydro turbine-governor with a nonlinear (inelastic) water column.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "HYGOV"; IEEE PES-TR1 2013, Fig. 4-3;
+    same structure in OpenIPSL ``HYGOV`` and PowerSimulationsDynamics.jl ``HydroTurbineGov``):
+
+        e    = Nref - dw - R c                                      (permanent droop on c)
+        x1   = e/(1 + s Tf)                                         (filter)
+        v    = clip((1 + s Tr)/(r Tr) x1, -VELM, VELM)              (temporary droop, gate velocity)
+        c    = 1/s v, non-windup limits [GMIN, GMAX]                (desired gate)
+        g    = c/(1 + s Tg)                                         (gate servo)
+        h    = (q/g)^2,  dq/dt = (1 - h)/TW                         (water column, head h0 = 1)
+        Tm   = At h (q - qNL) - DTURB dw g
+
+    States: [x1, c, g, q]. ``t_ref`` is the speed reference Nref = R c0 + dw0. The lead
+    (1 + sTr) of the filtered error uses dx1/dt, so Tf > 0 is required (PSS/E needs it too).
+    Tg = 0 makes the servo a pass-through (g = c); TW = 0 removes the water inertia (q = g,
+    h = 1). Near a closed gate, g in h = (q/g)^2 is floored at ``HEAD_GATE_FLOOR`` (1e-4 pu)
+    so the head and its gradient stay finite; above that floor the model is exact. (A
+    steady state with the gate closed below the floor keeps q = 1e-4, h = 1.)
+    """
+
+    r_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """R: permanent droop [pu speed / pu gate]."""
+    r_temp_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """r: temporary droop [pu speed / pu gate] (> 0)."""
+    tr_s: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
+    """Tr: governor (dashpot reset) time constant [s] (> 0)."""
+    tf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Tf: filter time constant [s] (> 0)."""
+    tg_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """Tg: gate servo time constant [s]."""
+    velm_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """VELM: gate velocity limit [pu/s] (> 0)."""
+    g_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """GMAX: maximum gate opening [pu]."""
+    g_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GMIN: minimum gate opening [pu]."""
+    tw_s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """TW: water inertia time constant [s]."""
+    at_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.2)
+    """At: turbine gain [pu power / pu flow] (> 0)."""
+    dturb_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """DTURB: turbine damping [pu power / (pu speed pu gate)]."""
+    q_nl_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.08)
+    """qNL: no-load water flow [pu]."""
+
+    def __check_init__(self):
+        check_positive(self, "r_pu", "r_temp_pu", "tr_s", "tf_s", "velm_pu_s", "at_pu")
+        check_nonnegative(self, "tg_s", "tw_s", "dturb_pu", "q_nl_pu")
+        if _concrete(self.g_max_pu, self.g_min_pu):
+            _check(self, self.g_max_pu >= self.g_min_pu,
+                   f"GMAX ({self.g_max_pu}) must be >= GMIN ({self.g_min_pu})")
+
+    def _hydraulics(self, state):
+        """(gate g, flow q, head h) from the states, bypassed blocks resolved."""
+        g, d_g = _lag(jnp.clip(state[1], self.g_min_pu, self.g_max_pu), state[2], self.tg_s)
+        q = jnp.where(self.tw_s > 0, state[3], g)
+        h = (q / jnp.maximum(g, HEAD_GATE_FLOOR)) ** 2
+        return g, q, h, d_g
+
+    def steady_state(self, t_ref, dw):
+        c = jnp.clip((t_ref - dw) / self.r_pu, self.g_min_pu, self.g_max_pu)
+        x1 = t_ref - dw - self.r_pu * c
+        return jnp.stack([x1, c, c, jnp.maximum(c, HEAD_GATE_FLOOR)])
+
+    def vector_field(self, state, dw, t_ref):
+        x1, c = state[0], state[1]
+        e = t_ref - dw - self.r_pu * jnp.clip(c, self.g_min_pu, self.g_max_pu)
+        d1 = (e - x1) / self.tf_s
+        v = jnp.clip((x1 + self.tr_s * d1) / (self.r_temp_pu * self.tr_s), -self.velm_pu_s, self.velm_pu_s)
+        d_c = _blocked(c, v, self.g_min_pu, self.g_max_pu)
+        g, q, h, d_g = self._hydraulics(state)
+        d_q = jnp.where(self.tw_s > 0, (1.0 - h) / _safe(self.tw_s), 0.0)
+        return jnp.stack([d1, d_c, d_g, d_q])
+
+    def torque(self, state, dw):
+        g, q, h, _ = self._hydraulics(state)
+        return self.at_pu * h * (q - self.q_nl_pu) - self.dturb_pu * dw * g
+
+    def reference_from_steady(self, t_m, dw):
+        g = (t_m + self.at_pu * self.q_nl_pu) / (self.at_pu - self.dturb_pu * dw)
+        return self.r_pu * g + dw
+
+
+# --- GGOV1 ------------------------------------------------------------------------------------
+
+class GGOV1(AbstractGovernor):
+    """PSS/E GGOV1, the GE general-purpose governor-turbine (gas, combined-cycle, diesel, ...).
+
+    Block diagram: Siemens PTI *PSS/E Model Library*, "GGOV1" (GE General Governor/Turbine
+    Model); IEEE PES-TR1 2013, Sec. 3.1.2.3 and its GGOV1 figure; PowerWorld "GGOV1" notes;
+    cross-checked against OpenIPSL ``GGOV1`` (BSD-3, verified against PSS/E). All signals are
+    on the governor base (Trate when > 0, else the machine base; ``base_ratio`` = Trate/MBASE
+    converts Tm and Pelec); ``t_ref`` is Pref.
+
+    Governor (PID with droop feedback selected by Rselect)::
+
+        Pe_m  = Pelec/(1 + s Tpelec)
+        fb    = Pe_m (Rselect = 1) | FSR (-1, requested stroke) | valve stroke s3 (-2)
+        err   = clip(Pref - dw - R fb, minerr, maxerr)
+        FSRN  = Kpgov err + xi + Kdgov s/(1 + s Tdgov) err
+        dxi/dt = Kigov err + (Kigov/Kpgov)(FSR - FSRN)          (integral with reset tracking)
+
+    Load (exhaust temperature) limiter::
+
+        texm  = [wf (1 + dw)^min(Dm, 0)] (1 + s Tsa)/(1 + s Tsb) / (1 + s Tfload)
+        tlim  = Ldref/Kturb + Wfnl
+        FSRT  = Kpload (tlim - texm) + xl
+        dxl/dt = Kiload (tlim - texm) + (Kiload/Kpload)(FSR - FSRT)
+
+    Acceleration limiter (PSS/E's discrete form ``FSRA = FSR(t - DELT) + Ka DELT (Aset - a)``)::
+
+        a     = s/(1 + s Ta) dw
+        FSRA  = q + Ka DELT (Aset - a),   dq/dt = (FSR - q)/DELT    (q: FSR one step back)
+
+    Low-value select and turbine::
+
+        FSR   = clip(min(FSRN, FSRT, FSRA), Vmin, Vmax)
+        ds3/dt = clip((FSR - s3)/Tact, Rclose, Ropen)               (valve stroke s3)
+        wf    = s3 (1 + dw if Flag = 1 else 1)                      (fuel flow)
+        Pm    = (1 + s Tc)/(1 + s Tb) [Kturb (e^{-s Teng} wf - Wfnl)] - Dm dw (Dm > 0)
+        Tm    = base_ratio Pm
+
+    States: [Pe_m, derivative filter, xi, q, s3, Teng Pade state, turbine lead-lag,
+    temperature lead-lag, Tfload lag, xl, acceleration filter].
+
+    Simplifications and assumptions (explicit):
+
+    * Pelec, the measured electrical power, is not an input of jaxdse's governor interface:
+      ``vector_field`` takes it as the optional keyword ``p_elec`` [pu, machine base] and
+      otherwise uses the model's own Pm (exact in the steady state, where Pelec = Pm).
+    * The supervisory load controller (Kimw, Pmwset, +-1.1 R limits) is not represented
+      (its state is 0): its reset time 1/Kimw is typically >= 100 s.
+    * The deadband db is treated as zero; Rup/Rdown (load-limit ramp) are ignored (PowerWorld
+      does the same); the fuel-flow transport delay e^{-s Teng} is the first-order Pade
+      approximation (1 - s Teng/2)/(1 + s Teng/2) (exact at Teng = 0).
+    * The integrators of the governor PI and of the load-limiter PI track the low-value-select
+      output with the reset time constant Kp/Ki (GE's external reset feedback; PowerWorld's
+      check "Kpgov/Kigov < time step" refers to it), which is their anti-windup. With Kp = 0
+      the tracking time constant is DELT instead.
+    * The acceleration limiter's one-step memory of FSR is a lag of time constant DELT
+      (``delt_s``, PSS/E's integration step, default 1/2 cycle at 60 Hz). It is a fast state:
+      explicit fixed-step integrators need steps below ~2 DELT, adaptive ones shorten theirs.
+      In the steady state (a = 0, Aset >= 0) the limiter never binds. Like PSS/E's discrete
+      form it also bounds the rate of rise of FSR by Ka (Aset - a) (0.1 pu/s for Ka = 10,
+      Aset = 0.01). Ka = 0 disables the limiter (FSRA = +inf); read literally the discrete
+      form would then never let FSR rise.
+    * Dm > 0: Pm decreases by Dm dw. Dm < 0: the engine power does not depend on speed but the
+      temperature signal is scaled by (1 + dw)^Dm (lower allowed fuel at low speed).
+    * Rselect = 0 (isochronous) is refused: with no droop the steady state does not determine
+      the load from (Pref, dw), which jaxdse's governor interface needs.
+    """
+
+    rselect: int = eqx.field(static=True, default=1)
+    """Rselect (ICON): droop feedback, 1 electrical power, -1 governor output (requested
+    stroke FSR), -2 fuel valve stroke; 0 (isochronous) is not supported."""
+    flag: int = eqx.field(static=True, default=1)
+    """Flag (ICON): 1 fuel flow proportional to speed (wf = s3 (1 + dw)), 0 independent of speed."""
+    r_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.04)
+    """R: permanent droop [pu speed / pu power (or pu stroke)] (> 0)."""
+    t_pelec_s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Tpelec: electrical power transducer time constant [s]."""
+    maxerr_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """maxerr: maximum speed error signal [pu]."""
+    minerr_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.05)
+    """minerr: minimum speed error signal [pu]."""
+    kpgov: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """Kpgov: governor proportional gain [pu/pu]."""
+    kigov: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """Kigov: governor integral gain [pu/pu/s]."""
+    kdgov: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kdgov: governor derivative gain [pu s/pu]."""
+    t_dgov_s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Tdgov: governor derivative filter time constant [s] (0: derivative off)."""
+    v_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Vmax: maximum valve position (FSR) [pu]."""
+    v_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.15)
+    """Vmin: minimum valve position (FSR) [pu]."""
+    t_act_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """Tact: actuator time constant [s] (> 0)."""
+    k_turb: Float[Array, ""] = eqx.field(converter=as_float, default=1.5)
+    """Kturb: turbine gain [pu power / pu fuel] (> 0)."""
+    w_fnl_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """Wfnl: no-load fuel flow [pu]."""
+    t_b_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Tb: turbine lag time constant [s] (0: lead-lag bypassed)."""
+    t_c_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Tc: turbine lead time constant [s]."""
+    t_eng_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Teng: transport lag of the engine (diesel) [s] (Pade (1,1) approximation)."""
+    t_fload_s: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
+    """Tfload: load limiter time constant [s]."""
+    kpload: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """Kpload: load limiter proportional gain [pu/pu]."""
+    kiload: Float[Array, ""] = eqx.field(converter=as_float, default=0.67)
+    """Kiload: load limiter integral gain [pu/pu/s]."""
+    ldref_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Ldref: load limiter reference [pu power, governor base]."""
+    dm_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Dm: speed sensitivity [pu power / pu speed] (> 0 damping, < 0 exponent of the fuel limit)."""
+    r_open_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Ropen: maximum valve opening rate [pu/s] (> 0)."""
+    r_close_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-0.1)
+    """Rclose: maximum valve closing rate [pu/s] (< 0)."""
+    kimw: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kimw: supervisory load controller gain [1/s] (kept; the loop is not represented)."""
+    aset_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """Aset: acceleration limiter set point [pu speed / s] (>= 0)."""
+    ka: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """Ka: acceleration limiter gain [pu/(pu/s)]."""
+    t_a_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Ta: acceleration limiter (derivative filter) time constant [s] (0: acceleration 0)."""
+    trate_mw: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Trate: turbine rating [MW] (0: machine base); kept, see ``base_ratio``."""
+    db_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """db: speed governor deadband [pu] (kept; treated as zero)."""
+    t_sa_s: Float[Array, ""] = eqx.field(converter=as_float, default=4.0)
+    """Tsa: temperature detection lead time constant [s]."""
+    t_sb_s: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
+    """Tsb: temperature detection lag time constant [s] (0: bypassed)."""
+    rup_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=99.0)
+    """Rup: maximum rate of load limit increase [pu/s] (kept; ignored)."""
+    rdown_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-99.0)
+    """Rdown: maximum rate of load limit decrease [pu/s] (kept; ignored)."""
+    delt_s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0 / 120.0)
+    """DELT: PSS/E integration step used by the acceleration limiter [s] (> 0)."""
+    base_ratio: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Trate / MBASE (1 when Trate = 0): Tm = base_ratio Pm, Pelec_gov = Pelec / base_ratio."""
+
+    def __check_init__(self):
+        if self.rselect not in (1, -1, -2):
+            raise ValueError(f"GGOV1.rselect must be 1, -1 or -2, got {self.rselect}"
+                             + (" (isochronous governors have no droop steady state)"
+                                if self.rselect == 0 else ""))
+        if self.flag not in (0, 1):
+            raise ValueError(f"GGOV1.flag must be 0 or 1, got {self.flag}")
+        check_positive(self, "r_pu", "t_act_s", "k_turb", "r_open_pu_s", "delt_s", "base_ratio")
+        check_nonnegative(self, "t_pelec_s", "kpgov", "kigov", "kdgov", "t_dgov_s", "t_b_s", "t_c_s",
+                          "t_eng_s", "t_fload_s", "kpload", "kiload", "kimw", "aset_pu_s", "ka",
+                          "t_a_s", "t_sa_s", "t_sb_s")
+        if _concrete(self.r_close_pu_s, self.v_max_pu, self.v_min_pu, self.maxerr_pu, self.minerr_pu):
+            _check(self, self.r_close_pu_s < 0, f"Rclose must be < 0, got {self.r_close_pu_s}")
+            _check(self, self.v_max_pu >= self.v_min_pu,
+                   f"Vmax ({self.v_max_pu}) must be >= Vmin ({self.v_min_pu})")
+            _check(self, self.maxerr_pu >= self.minerr_pu,
+                   f"maxerr ({self.maxerr_pu}) must be >= minerr ({self.minerr_pu})")
+
+    # -- algebraic pieces --
+    def _speed_factor(self, dw):
+        return 1.0 + dw if self.flag == 1 else jnp.ones_like(jnp.asarray(dw, float))
+
+    def _damping(self, dw):
+        return jnp.where(self.dm_pu > 0, self.dm_pu * dw, 0.0)
+
+    def _temp_factor(self, dw):
+        return jnp.power(1.0 + dw, jnp.minimum(self.dm_pu, 0.0))
+
+    @property
+    def _tlim(self):
+        return self.ldref_pu / self.k_turb + self.w_fnl_pu
+
+    def _turbine(self, state, dw):
+        """(Pm on the governor base, fuel flow wf, d(Pade)/dt, d(lead-lag)/dt)."""
+        wf = state[4] * self._speed_factor(dw)
+        on = self.t_eng_s > 0
+        wf_d = jnp.where(on, 2.0 * state[5] - wf, wf)
+        d_e = jnp.where(on, (wf - state[5]) / (0.5 * _safe(self.t_eng_s)), 0.0)
+        p_t, d_t = _lead_lag(self.k_turb * (wf_d - self.w_fnl_pu), state[6], self.t_c_s, self.t_b_s)
+        return p_t - self._damping(dw), wf, d_e, d_t
+
+    def _tracking_rate(self, kp, ki):
+        """Reset-tracking rate of a PI integrator: Ki/Kp, or 1/DELT when Kp = 0."""
+        return jnp.where(kp > 0, ki / _safe(kp), 1.0 / self.delt_s)
+
+    def steady_state(self, t_ref, dw):
+        ff, damp = self._speed_factor(dw), self._damping(dw)
+        if self.rselect == 1:
+            f_gov = (((t_ref - dw) / self.r_pu + damp) / self.k_turb + self.w_fnl_pu) / ff
+        else:
+            f_gov = (t_ref - dw) / self.r_pu
+        f_load = self._tlim / (ff * self._temp_factor(dw))
+        fsr = jnp.clip(jnp.minimum(f_gov, f_load), self.v_min_pu, self.v_max_pu)
+        wf = fsr * ff
+        p_t = self.k_turb * (wf - self.w_fnl_pu)
+        pe = p_t - damp
+        fb = pe if self.rselect == 1 else fsr
+        err = jnp.clip(t_ref - dw - self.r_pu * fb, self.minerr_pu, self.maxerr_pu)
+        k_g = self._tracking_rate(self.kpgov, self.kigov)
+        xi = fsr - self.kpgov * err + jnp.where(k_g > 0, self.kigov * err / _safe(k_g), 0.0)
+        texm = wf * self._temp_factor(dw)
+        e_l = self._tlim - texm
+        k_l = self._tracking_rate(self.kpload, self.kiload)
+        xl = fsr - self.kpload * e_l + jnp.where(k_l > 0, self.kiload * e_l / _safe(k_l), 0.0)
+        dw = jnp.asarray(dw, float) + 0.0 * fsr
+        return jnp.stack([pe, err, xi, fsr, fsr, wf, p_t, texm, texm, xl, dw])
+
+    def vector_field(self, state, dw, t_ref, p_elec=None):
+        pm, wf, d_e, d_t = self._turbine(state, dw)
+        p_el = pm if p_elec is None else p_elec / self.base_ratio
+        pe_m, d_pe = _lag(p_el, state[0], self.t_pelec_s)
+        q, s3 = state[3], state[4]
+        fb = {1: pe_m, -1: q, -2: s3}[self.rselect]
+        err = jnp.clip(t_ref - dw - self.r_pu * fb, self.minerr_pu, self.maxerr_pu)
+        deriv, d_d = _washout(err, state[1], self.t_dgov_s)
+        fsrn = self.kpgov * err + state[2] + self.kdgov * deriv
+        # load limiter
+        y_s, d_s = _lead_lag(wf * self._temp_factor(dw), state[7], self.t_sa_s, self.t_sb_s)
+        texm, d_f = _lag(y_s, state[8], self.t_fload_s)
+        e_l = self._tlim - texm
+        fsrt = self.kpload * e_l + state[9]
+        # acceleration limiter
+        accel, d_a = _washout(dw, state[10], self.t_a_s)
+        fsra = jnp.where(self.ka > 0, q + self.ka * self.delt_s * (self.aset_pu_s - accel), jnp.inf)
+        fsr = jnp.clip(jnp.minimum(jnp.minimum(fsrn, fsrt), fsra), self.v_min_pu, self.v_max_pu)
+        d_q = (fsr - q) / self.delt_s
+        d_i = self.kigov * err + self._tracking_rate(self.kpgov, self.kigov) * (fsr - fsrn)
+        d_l = self.kiload * e_l + self._tracking_rate(self.kpload, self.kiload) * (fsr - fsrt)
+        d_s3 = jnp.clip((fsr - s3) / self.t_act_s, self.r_close_pu_s, self.r_open_pu_s)
+        return jnp.stack([d_pe, d_d, d_i, d_q, d_s3, d_e, d_t, d_s, d_f, d_l, d_a])
+
+    def torque(self, state, dw):
+        return self.base_ratio * self._turbine(state, dw)[0]
+
+    def reference_from_steady(self, t_m, dw):
+        pm = t_m / self.base_ratio
+        if self.rselect == 1:
+            return self.r_pu * pm + dw
+        fsr = ((pm + self._damping(dw)) / self.k_turb + self.w_fnl_pu) / self._speed_factor(dw)
+        return self.r_pu * fsr + dw
+
+
+class ScaledGovernor(AbstractGovernor):
+    """``base`` with its torque response scaled and shifted:
+    Tm = Tm0 + (1 + gain)(Tm_base - Tm0) + offset.
+
+    The identification (``identify``) estimates ``gain``, the relative error of the governor
+    model's response, and replays the event with it.
+    """
+
+    base: AbstractGovernor
+    gain: Array | float = 0.0
+    """Relative error of the response [-] (0: the base model)."""
+    t_m0: Array | float = 0.0
+    """Torque about which the response is scaled [pu]."""
+    offset: Array | float = 0.0
+    """Constant torque added [pu]."""
+
+    def steady_state(self, t_ref, dw):
+        return self.base.steady_state(t_ref, dw)
+
+    def vector_field(self, state, dw, t_ref):
+        return self.base.vector_field(state, dw, t_ref)
+
+    def torque(self, state, dw):
+        return self.t_m0 + (1.0 + self.gain) * (self.base.torque(state, dw) - self.t_m0) + self.offset
+
+    def reference_from_steady(self, t_m, dw):
+        base = self.t_m0 + (t_m - self.offset - self.t_m0) / (1.0 + self.gain)
+        return self.base.reference_from_steady(base, dw)
+
+
+# --- WeightedGovernor -------------------------------------------------------------------------
+
+class WeightedGovernor(AbstractGovernor):
+    """The governors of the units of an aggregated plant, summed with the units' MBASE shares.
+
+        Tm = sum_k w_k Tm_k(state_k, dw) + (1 - sum_k w_k) T_ref        [pu, plant base]
+
+    ``w_k`` = MBASE_k / sum of MBASE over the plant's units [-]; the remainder 1 - sum w_k is
+    the share of units without a governor, whose torque stays at the reference. ``t_ref`` is
+    the plant's torque at nominal speed in steady state [pu, plant base]; every unit runs at
+    the same loading in pu of its own base, so unit k gets the reference that holds
+    Tm_k = t_ref at dw = 0 (``reference_from_steady`` of its own model).
+
+    States: the units' states one after the other, then the constant share (held at t_ref).
+    A unit with weight 0 changes nothing: a fleet pads every plant to the same tuple of
+    models (e.g. one TGOV1, GAST and HYGOV slot each) so that all plants share one pytree
+    structure and vmap over one compiled call.
+    """
+
+    governors: tuple[AbstractGovernor, ...]
+    """One governor model per unit (or per padded slot)."""
+    weights: Float[Array, " k"] = eqx.field(converter=as_float)
+    """MBASE share of each unit in the plant [-] (>= 0, sum <= 1)."""
+
+    def __check_init__(self):
+        if len(self.governors) != np.shape(self.weights)[-1]:
+            raise ValueError(f"WeightedGovernor: {len(self.governors)} governors but "
+                             f"{np.shape(self.weights)[-1]} weights")
+        check_nonnegative(self, "weights")
+        if concrete(self.weights):
+            _check(self, np.sum(np.asarray(self.weights), axis=-1) <= 1.0 + 1e-9,
+                   f"weights must sum to <= 1, got {np.asarray(self.weights)}")
+
+    def _sizes(self):
+        return [jnp.shape(g.steady_state(1.0, 0.0))[0] for g in self.governors]
+
+    def _parts(self, state):
+        out, k = [], 0
+        for n in self._sizes():
+            out.append(state[k:k + n])
+            k += n
+        return out, state[k]
+
+    def _refs(self, t_ref):
+        return [g.reference_from_steady(t_ref, 0.0) for g in self.governors]
+
+    def steady_state(self, t_ref, dw):
+        parts = [g.steady_state(r, dw) for g, r in zip(self.governors, self._refs(t_ref))]
+        const = jnp.asarray(t_ref, float) + 0.0 * jnp.asarray(dw, float)
+        return jnp.concatenate(parts + [const[None]])
+
+    def vector_field(self, state, dw, t_ref):
+        parts, const = self._parts(state)
+        d = [g.vector_field(x, dw, r) for g, x, r in zip(self.governors, parts, self._refs(t_ref))]
+        return jnp.concatenate(d + [jnp.zeros_like(const)[None]])
+
+    def torque(self, state, dw):
+        parts, const = self._parts(state)
+        total = (1.0 - jnp.sum(self.weights)) * const
+        for k, (g, x) in enumerate(zip(self.governors, parts)):
+            total = total + self.weights[k] * g.torque(x, dw)
+        return total
+
+    def reference_from_steady(self, t_m, dw):
+        # T such that the steady torque at dw is t_m: T <- T + (t_m - Tm(T)), three times (the
+        # map has slope 1 at dw = 0 and within the limits, so one step is nearly exact).
+        t_ref = t_m
+        for _ in range(3):
+            t_ref = t_ref + (t_m - self.torque(self.steady_state(t_ref, dw), dw))
+        return t_ref

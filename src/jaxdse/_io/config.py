@@ -15,10 +15,20 @@ Sections (every key optional unless marked; see ``examples/*.toml`` for commente
                     "auto" | "fwd" | "bwd" and weights = {x2, playback, parameter,
                     burn_in_s, band}; role "auto"
                     generators train, role "cross" generators are held out
+    [identify]      enabled (true: the batch identification runs after the online estimator),
+                    settle_s, governor_smoothing_hz, robust_iterations, huber_k, hac_window_s,
+                    and the verdict's identified_ci, not_identified_ci, max_condition,
+                    diverged_smape
     [output]        dir, figures, trajectories
     [[generator]]   name*, role, a2_reference, h_reference_s, and per-generator tables
                     measurement, line, transformer, aux, machine, governor that override the
                     sections above (one entry per generator; none means one generator)
+    plant_defaults  "paper": fill the plant data the config leaves out with the paper's plant
+
+No silent defaults for plant data: the sections the PMU location needs (machine and governor;
+transformer and aux from the HV side; line from the substation) and the machine's rating
+(s_rated_mva, v_rated_kv, f_nominal_hz) must be given, unless ``plant_defaults = "paper"``.
+Keys left out of a given section take the documented defaults; ``summary.json`` lists them.
 
 The file is validated on load: unknown keys, missing required values and impossible values
 raise :class:`InputError` naming the key.
@@ -33,22 +43,27 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .._core.drem import ObserverConfig
-from .._core.governor import TGOV1
+from .._core.governor import GAST, GGOV1, HYGOV, IEEEG1, TGOV1
+from .._core.identify import IdentifySettings
 from .._core.integrate import Integrator
 from .._core.machine import Machine
 from .._core.mapping import AuxiliarySystem, Line, Transformer
 from .._core.plant import Plant
 from .._core.settings import Settings
+from .._core.verdict import VerdictSettings
 from .._many.tune import AUTODIFF_MODES, TUNABLE, LossWeights
 from .errors import InputError
 from .measurement import CHOICE_KEYS, COLUMN_ROLES, UNIT_KEYS, MeasurementSpec, spec_value_error
 
 PLANT_MODULES = {"line": Line, "transformer": Transformer, "aux": AuxiliarySystem, "machine": Machine}
-GOVERNORS = {"TGOV1": TGOV1}
+GOVERNORS = {"TGOV1": TGOV1, "IEEEG1": IEEEG1, "GAST": GAST, "HYGOV": HYGOV, "GGOV1": GGOV1}
 PLANT_SECTIONS = ("measurement", "line", "transformer", "aux", "machine", "governor")
 SETTINGS_KEYS = {"derivative_half_width": int, "qss_window_s": float, "convergence_band": float,
                  "min_hold_s": float, "min_log_contraction": float, "offline_current_pu": float}
 OUTPUT_KEYS = {"dir": str, "figures": bool, "trajectories": bool}
+MACHINE_RATING_KEYS = ("s_rated_mva", "v_rated_kv", "f_nominal_hz")
+ESTIMATED_MACHINE_KEYS = ("h_s", "d_pu_s")
+"""Machine fields that the estimator never reads (it estimates them; the simulator uses them)."""
 ROLES = ("auto", "cross", "estimate")
 
 
@@ -62,6 +77,8 @@ class GeneratorRun:
     plant: Plant
     a2_reference: float | None = None
     h_reference_s: float | None = None
+    defaults_used: tuple[str, ...] = ()
+    """Plant values the config left out, taken from the defaults ("section.key")."""
 
 
 @dataclass(frozen=True)
@@ -75,6 +92,10 @@ class RunConfig:
     out_dir: Path
     figures: bool = True
     trajectories: bool = True
+    identify: IdentifySettings | None = IdentifySettings()
+    """Batch identification after the online estimator; None: off ([identify] enabled = false)."""
+    verdict: VerdictSettings = VerdictSettings()
+    """Thresholds of the verdict."""
     sweep: dict = dataclasses.field(default_factory=dict)
     """Validated [sweep] table (see :func:`jaxdse.sweep_configs`)."""
     tune: dict = dataclasses.field(default_factory=dict)
@@ -97,8 +118,13 @@ def load_config(path) -> RunConfig:
 
 def parse_config(data: dict, path: Path) -> RunConfig:
     """Validate a parsed TOML document (see the module docstring)."""
-    allowed = set(PLANT_SECTIONS) | {"observer", "settings", "output", "generator", "sweep", "tune"}
+    allowed = set(PLANT_SECTIONS) | {"observer", "settings", "output", "generator", "sweep", "tune",
+                                     "plant_defaults", "identify"}
     _no_unknown(path, data, allowed, "")
+    paper = data.get("plant_defaults")
+    if paper not in (None, "paper"):
+        raise InputError(path, f"must be \"paper\" (the paper's 1100 MVA, 50 Hz plant fills what the "
+                         f"config leaves out), got {paper!r}", key="plant_defaults")
     base = {s: _table(path, data, s, s) for s in PLANT_SECTIONS}
     gens = data.get("generator", [{}])
     if isinstance(gens, dict) or not isinstance(gens, list) or not gens:
@@ -142,6 +168,7 @@ def parse_config(data: dict, path: Path) -> RunConfig:
         for k in ("a2_reference", "h_reference_s"):
             if k in g:
                 refs[k] = _positive_number(path, g[k], prefix + k)
+        defaults = _plant_defaults(path, merged, prefix, paper == "paper")
         machine = _module(path, Machine, merged["machine"], "machine", prefix)
         plant = Plant(machine=machine,
                       line=_module(path, Line, merged["line"], "line", prefix),
@@ -150,13 +177,49 @@ def parse_config(data: dict, path: Path) -> RunConfig:
                       governor=_governor(path, merged["governor"], prefix),
                       s_base_mva=merged["measurement"].get("s_base_mva", 100.0))
         spec = _measurement(path, merged["measurement"], float(machine.f_nominal_hz), prefix)
-        runs.append(GeneratorRun(name=name, role=role, measurement=spec, plant=plant, **refs))
+        runs.append(GeneratorRun(name=name, role=role, measurement=spec, plant=plant,
+                                 defaults_used=defaults, **refs))
     out_dir = Path(out.get("dir", "jaxdse_out"))
+    identify, verdict = _identify(path, _table(path, data, "identify", "identify"))
     return RunConfig(path=path, generators=tuple(runs), observer=observer, settings=settings,
+                     identify=identify, verdict=verdict,
                      out_dir=out_dir if out_dir.is_absolute() else path.parent / out_dir,
                      figures=out.get("figures", True), trajectories=out.get("trajectories", True),
                      sweep=_sweep(path, _table(path, data, "sweep", "sweep"), observer),
                      tune=_tune(path, _table(path, data, "tune", "tune")))
+
+
+def _sections_needed(location: str) -> tuple[str, ...]:
+    """The plant sections that the mapping from ``location`` to the rotor reads."""
+    return ("machine", "governor") + (("transformer", "aux") if location != "terminal" else ()) + \
+        (("line",) if location == "substation" else ())
+
+
+def _plant_defaults(path, merged: dict, prefix: str, paper: bool) -> tuple[str, ...]:
+    """No silent defaults: every plant section the location needs, and the machine's rating,
+    must be in the config unless it opts into the paper's plant. Returns what was defaulted."""
+    location = merged["measurement"].get("location", "substation")
+    needed = _sections_needed(location)
+    if not paper:
+        for sec in needed:
+            if not merged[sec]:
+                raise InputError(path, f"no [{sec}] section, which a PMU at location = {location!r} "
+                                 "needs: jaxdse does not guess plant data; give it, or set "
+                                 "plant_defaults = \"paper\" to use the paper's plant",
+                                 key=prefix + sec)
+        for k in MACHINE_RATING_KEYS:
+            if k not in merged["machine"]:
+                raise InputError(path, "is required: the machine's rating (s_rated_mva, "
+                                 "v_rated_kv, f_nominal_hz) is never defaulted", key=f"{prefix}machine.{k}")
+    used = []
+    for sec in needed:
+        cls = GOVERNORS.get(merged["governor"].get("model", "TGOV1")) if sec == "governor" \
+            else PLANT_MODULES[sec]
+        if cls is None:
+            continue  # an unknown governor model: _governor names it
+        used += [f"{sec}.{f.name}" for f in dataclasses.fields(cls)
+                 if f.name not in merged[sec] and f.name not in ESTIMATED_MACHINE_KEYS]
+    return tuple(used)
 
 
 def _param_names(path, names, key):
@@ -166,6 +229,27 @@ def _param_names(path, names, key):
             raise InputError(path, f"unknown observer parameter {n!r}; tunable: {', '.join(TUNABLE)}",
                              key=key)
     return names
+
+
+def _identify(path, table: dict):
+    """[identify]: enabled, the IdentifySettings fields and the VerdictSettings fields."""
+    id_fields = {f.name for f in dataclasses.fields(IdentifySettings)}
+    v_fields = {f.name for f in dataclasses.fields(VerdictSettings)}
+    _no_unknown(path, table, id_fields | v_fields | {"enabled"}, "identify.")
+    enabled = table.get("enabled", True)
+    if not isinstance(enabled, bool):
+        raise InputError(path, f"must be true or false, got {enabled!r}", key="identify.enabled")
+    kw_id, kw_v = {}, {}
+    for k, v in table.items():
+        if k == "enabled":
+            continue
+        if k == "robust_iterations":
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise InputError(path, f"must be an integer >= 0, got {v!r}", key=f"identify.{k}")
+            kw_id[k] = v
+            continue
+        (kw_id if k in id_fields else kw_v)[k] = _positive_number(path, v, f"identify.{k}")
+    return (IdentifySettings(**kw_id) if enabled else None), VerdictSettings(**kw_v)
 
 
 def _sweep(path, table: dict, observer: ObserverConfig) -> dict:
@@ -279,6 +363,19 @@ def _governor(path, table: dict, prefix: str):
     return _module(path, GOVERNORS[model], table, "governor", prefix)
 
 
+def _check_timezone(path, name: str, key: str) -> None:
+    import re
+    import zoneinfo
+
+    if re.fullmatch(r"[+-]\d{2}:?\d{2}", name.strip()) or name.upper() == "UTC":
+        return
+    try:
+        zoneinfo.ZoneInfo(name)
+    except (zoneinfo.ZoneInfoNotFoundError, ValueError):
+        raise InputError(path, f"unknown time zone {name!r}; use an IANA name such as "
+                         "\"Europe/Berlin\", \"UTC\" or an offset \"+01:00\"", key=key) from None
+
+
 def _settings(path, table: dict) -> Settings:
     _no_unknown(path, table, set(SETTINGS_KEYS) | {"integrator"}, "settings.")
     kwargs = {}
@@ -335,9 +432,30 @@ def _measurement(path, table: dict, f_nominal_hz: float, prefix: str,
             if problem:
                 raise InputError(path, problem, key=key + k)
             kwargs[k] = v
-        elif k in ("delimiter", "quotechar"):
+        elif k in ("delimiter", "quotechar", "time_format", "timezone"):
             if not isinstance(v, str) or not v:
                 raise InputError(path, f"must be a non-empty string, got {v!r}", key=key + k)
+            if k == "time_format" and "%" not in v:
+                raise InputError(path, f"must use strftime codes such as %Y-%m-%d %H:%M:%S.%f, got {v!r}",
+                                 key=key + k)
+            if k == "timezone":
+                _check_timezone(path, v, key + k)
+            kwargs[k] = v
+        elif k == "decimal":
+            if v not in (".", ","):
+                raise InputError(path, f"must be \".\" or \",\", got {v!r}", key=key + k)
+            kwargs[k] = v
+        elif k == "na_values":
+            if not isinstance(v, list) or not all(isinstance(w, str) for w in v):
+                raise InputError(path, "must be a list of words, e.g. [\"n/a\", \"---\"]", key=key + k)
+            kwargs[k] = tuple(v)
+        elif k == "skip_rows":
+            if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+                raise InputError(path, f"must be an integer >= 0, got {v!r}", key=key + k)
+            kwargs[k] = v
+        elif k == "units_row":
+            if not isinstance(v, bool):
+                raise InputError(path, f"must be true or false, got {v!r}", key=key + k)
             kwargs[k] = v
         elif k in ("max_gap_s", "min_segment_s"):
             kwargs[k] = _number(path, v, key + k)

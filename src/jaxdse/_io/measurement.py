@@ -2,17 +2,28 @@
 
 Applied at the edge, in NumPy, in this order:
 
-1. pick the columns (positive-sequence magnitude/angle, or three-phase a/b/c magnitude/angle);
-2. time: seconds, milliseconds or ISO timestamps; rows with no time are dropped, out-of-order
-   rows sorted, duplicated timestamps dropped (the first row is kept);
-3. units: voltage kV/V phase-to-phase or phase-to-ground or pu, current A/kA/pu, angles deg/rad,
-   converted to pu of the system base (``s_base_mva``, ``v_base_kv`` phase-to-phase);
-   three-phase -> positive sequence; current direction -> generator convention (out of the plant);
-4. gaps: samples with a NaN in any phasor channel and missing timestamps form gaps; gaps up to
-   ``max_gap_s`` are bridged by linear interpolation of magnitude and unwrapped angle, longer
-   ones split the recording (or fail);
-5. resampling onto a uniform grid (linear, angles unwrapped first);
-6. plausibility of units (voltage near 1 pu, current below 3x rating, frequency near nominal).
+1. pick the columns (positive-sequence magnitude/angle, or three-phase a/b/c magnitude/angle;
+   optionally the frequency and a C37.118 STAT word or a data-valid flag);
+2. time: seconds, milliseconds or timestamps (ISO 8601, or ``time_format``, in ``timezone``);
+   rows with no time are dropped, out-of-order rows sorted, duplicated timestamps dropped
+   (the first row is kept); the frame rate must lie in 1-240 frames/s;
+3. units: voltage kV/V phase-to-phase or phase-to-ground or pu, current A/kA/pu, angles
+   deg/rad, converted to pu of the system base (``s_base_mva``, ``v_base_kv`` phase-to-phase);
+   three-phase -> positive sequence; current direction -> generator convention;
+4. plausibility of units and set-up, from medians and statistics of the whole recording:
+   no stuck (constant) magnitude or frequency channel, voltage near 1 pu (which also tells
+   phase-to-ground from phase-to-phase), current below 3x rating and not a power-carrying
+   trickle (a unit or CT-ratio mistake), no reversed power, frequency near nominal, angle
+   steps that fit the declared angle unit, the voltage-angle drift against f_nominal, the
+   frame rate against f_nominal (without a frequency channel), and the PMU voltage base
+   against the machine's rated voltage for the declared location;
+5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, and
+   spikes (a Hampel filter: deviation from a running median beyond ``SPIKE_SIGMAS`` robust
+   standard deviations, in runs of at most ``SPIKE_MAX_SAMPLES``) become missing; a spike in
+   the voltage and the current at the same sample is a disturbance and is kept;
+6. gaps: missing samples form gaps; gaps up to ``max_gap_s`` are bridged by linear
+   interpolation of magnitude and unwrapped angle, longer ones split the recording (or fail);
+7. resampling onto a uniform grid (linear, angles unwrapped first).
 
 Everything handled is reported in ``data_quality``; everything else is an :class:`InputError`.
 """
@@ -20,15 +31,15 @@ Everything handled is reported in ``data_quality``; everything else is an :class
 from __future__ import annotations
 
 from dataclasses import dataclass
-from datetime import datetime
 
 import numpy as np
 
+from .._core.machine import Machine
 from .._core.mapping import LOCATIONS
 from .._core.recording import Recording
 from .._core.sequence import positive_sequence
 from .errors import InputError
-from .readers import FORMATS, Table, load_table
+from .readers import FORMATS, CsvOptions, Table, load_table
 
 VOLTAGE_UNITS = {"kv_ll": (1e3, False), "kv_ln": (1e3, True), "v_ll": (1.0, False),
                  "v_ln": (1.0, True), "pu": (None, False)}
@@ -40,6 +51,9 @@ ANGLE_UNITS = {"deg": np.pi / 180, "rad": 1.0}
 TIME_UNITS = ("s", "ms", "iso")
 DIRECTIONS = ("out_of_plant", "into_plant")
 GAP_POLICIES = ("split", "error")
+POSITIVE = ("v_mag", "v_ang", "i_mag", "i_ang")
+THREE_PHASE = tuple(f"{q}_{p}_{c}" for q in "vi" for c in ("mag", "ang") for p in "abc")
+COLUMN_ROLES = ("time", "frequency", "stat", "valid") + POSITIVE + THREE_PHASE
 UNIT_KEYS = {"voltage_unit": ("kV_LL", "kV_LN", "V_LL", "V_LN", "pu"), "current_unit": ("A", "kA", "pu"),
              "angle_unit": ("deg", "rad"), "frequency_unit": ("Hz",)}
 """Unit keys of [measurement] -> the spellings users write (matched case-insensitively)."""
@@ -47,15 +61,61 @@ CHOICE_KEYS = {"format": FORMATS, "location": LOCATIONS, "current_direction": DI
                "on_long_gap": GAP_POLICIES, "time_unit": TIME_UNITS}
 """Keys of [measurement] that take one of a few words (matched exactly)."""
 
-# Plausibility of the units and bases: the median of each quantity over the recording.
-PLAUSIBLE_VOLTAGE_PU = (0.5, 1.5)
-"""Median voltage magnitude [pu of v_base_kv] outside this range: wrong unit or base."""
+# Plausibility of units and set-up (whole recording).
+PLAUSIBLE_VOLTAGE_PU = (0.76, 1.3)
+"""Median voltage magnitude [pu of v_base_kv] outside this range: wrong unit or base. The
+range is narrower than a factor sqrt 3, so phase-to-ground values declared phase-to-phase
+(and the reverse) always fall outside it."""
 MAX_CURRENT_PU_MACHINE = 3.0
 """Median current [pu of the machine rating] above this: wrong unit or base."""
+MIN_CURRENT_PU_MACHINE = 0.01
+"""Median current [pu of the machine rating] below which a current that still carries power
+(power factor above ``MIN_POWER_FACTOR``) is a unit or CT-ratio mistake (kA read as A,
+secondary amperes); an offline machine's current carries none."""
+MIN_POWER_FACTOR = 0.5
+"""Median P / |S| above which a small current is a real, scaled load current [-]."""
 MIN_POWER_PU_MACHINE = -0.05
 """Median active power [pu of the machine rating] below this: the current is reversed."""
 MAX_FREQUENCY_OFFSET = 0.1
 """Median frequency off nominal by more than this fraction of f_nominal [-]: not in Hz."""
+FRAME_RATE_HZ = (1.0, 240.0)
+"""Frame rates a PMU reports [frames/s]; outside: the time unit is wrong."""
+SYSTEM_RATES_HZ = {50.0: (25.0, 50.0, 100.0), 60.0: (30.0, 60.0, 120.0)}
+"""Reporting rates [frames/s] that IEEE C37.118 gives only one system frequency [Hz]; with no
+frequency channel, such a rate is the only sign of a wrong f_nominal."""
+MAX_ANGLE_DRIFT_HZ = 2.0
+"""Mean rotation of the voltage angle against f_nominal above this [Hz]: wrong f_nominal or
+angle unit (grids stay within a fraction of a hertz)."""
+MAX_ANGLE_STEP_RAD = 1.0
+"""Largest voltage-angle step between two frames after unwrapping [rad]: more is not physical
+(60 degrees a frame); degrees read as radians make steps of 2 pi - 360 mod 2 pi = 1.86 rad."""
+OUTLIER_SHARE = 0.01
+"""Share of frames that the angle-unit checks leave to the spike screening (single bad
+samples must not decide the unit) [-]."""
+TERMINAL_BASE_RATIO = (0.75, 1.33)
+"""PMU voltage base / machine rated voltage expected at location "terminal" [-]."""
+HV_BASE_RATIO = 1.2
+"""PMU voltage base / machine rated voltage above which the PMU is on the HV side [-]."""
+
+# Screening of single samples.
+VOLTAGE_RANGE_PU = (0.05, 2.0)
+"""A voltage sample outside this range [pu] is not a measurement of a running machine."""
+MAX_CURRENT_SAMPLE_PU_MACHINE = 10.0
+"""A current sample above this [pu of the machine rating] exceeds any fault current."""
+MAX_FREQUENCY_SAMPLE_OFFSET_HZ = 5.0
+"""A frequency sample farther than this from f_nominal [Hz] is a measurement error."""
+SPIKE_HALF_WIDTH = 5
+"""Half width of the running median of the spike filter [samples]."""
+SPIKE_SIGMAS = 8.0
+"""Deviation from the running median, in robust standard deviations (1.4826 MAD), that makes a
+sample a spike."""
+SPIKE_FLOOR = {"magnitude": 0.02, "angle_rad": 0.05, "frequency_hz": 0.05}
+"""Smallest deviation that can be a spike: relative for magnitudes [-], absolute for angles
+[rad] and frequency [Hz] (noise-free data have a zero MAD)."""
+SPIKE_MAX_SAMPLES = 3
+"""Longest run of outlying samples that is a spike; longer runs are the signal (an event)."""
+STAT_INVALID_BITS = 0xE000
+"""C37.118 STAT bits that make a frame invalid: data error (bits 15-14) and PMU sync error (13)."""
 
 
 def spec_value_error(key: str, value) -> str | None:
@@ -78,24 +138,27 @@ def current_base_a(s_base_mva: float, v_base_kv: float) -> float:
 def voltage_base_v(v_base_kv: float, unit: str) -> float:
     """Volts per pu for voltages written in ``unit`` (phase-to-ground units divide by sqrt 3)."""
     return v_base_kv * 1e3 / (np.sqrt(3.0) if VOLTAGE_UNITS[unit.lower()][1] else 1.0)
-POSITIVE = ("v_mag", "v_ang", "i_mag", "i_ang")
-THREE_PHASE = tuple(f"{q}_{p}_{c}" for q in "vi" for c in ("mag", "ang") for p in "abc")
-COLUMN_ROLES = ("time", "frequency") + POSITIVE + THREE_PHASE
 
 
 @dataclass(frozen=True)
 class MeasurementSpec:
-    """How to read one PMU recording: file, columns, units, bases, direction and gap policy."""
+    """How to read one PMU recording: file, layout, columns, units, bases, direction, gaps."""
 
     file: tuple[str, ...]
     columns: dict
-    """Role ("time", "frequency", "v_mag", ..., or "v_a_mag", ...) -> column name or number."""
+    """Role ("time", "frequency", "stat", "valid", "v_mag", ..., or "v_a_mag", ...) -> column
+    name or 0-based number."""
     format: str | None = None
     location: str = "substation"
     voltage_unit: str = "kV_LL"
     current_unit: str = "A"
     angle_unit: str = "deg"
     time_unit: str = "s"
+    """"s" or "ms" for numbers, "iso" for timestamps (text timestamps are read as such anyway)."""
+    time_format: str | None = None
+    """strftime format of text timestamps, e.g. "%m/%d/%Y %H:%M:%S.%f"; None: ISO 8601."""
+    timezone: str | None = None
+    """Time zone of timestamps that carry none (e.g. "UTC", "Europe/Berlin", "+01:00")."""
     frequency_unit: str = "Hz"
     v_base_kv: float | None = None
     """Phase-to-phase base voltage at the PMU [kV]; needed unless voltages are in pu."""
@@ -107,35 +170,53 @@ class MeasurementSpec:
     max_gap_s: float = 0.5
     on_long_gap: str = "split"
     min_segment_s: float = 30.0
-    delimiter: str = ","
+    delimiter: str | None = None
+    """CSV separator (",", ";", "\\t", "|" or "whitespace"); None: detected from the header."""
     quotechar: str = '"'
+    decimal: str | None = None
+    """CSV decimal mark "." or ","; None: detected."""
+    na_values: tuple[str, ...] = ()
+    """Extra words that mark a missing value in a CSV."""
+    skip_rows: int = 0
+    """Metadata lines before the CSV header."""
+    units_row: bool | None = None
+    """A units row under the CSV header; None: detected."""
 
     @property
     def three_phase(self) -> bool:
         return any(k in self.columns for k in THREE_PHASE)
 
+    @property
+    def csv_options(self) -> CsvOptions:
+        return CsvOptions(delimiter=self.delimiter, quotechar=self.quotechar, decimal=self.decimal,
+                          na_values=tuple(self.na_values), skip_rows=self.skip_rows,
+                          units_row=self.units_row)
 
-def read_measurement(spec: MeasurementSpec, s_rated_mva: float = 1e9):
-    """Read, validate and condition one recording.
+
+def read_measurement(spec: MeasurementSpec, machine: Machine | None = None):
+    """Read, validate, screen and condition one recording.
 
     Arguments:
         spec: the measurement description.
-        s_rated_mva: machine rating, for the plausibility check of the current.
+        machine: the machine behind the PMU: its rating and rated voltage make the plausibility
+            checks of the current and of the PMU voltage base (None: not checked).
 
     Returns:
         ``(segments, quality)``: a list of ``(t0_s, Recording)`` (one per part between long
         gaps, longest first) and the ``data_quality`` report (a JSON-ready dict).
     """
-    table = load_table(spec.file, spec.format, delimiter=spec.delimiter, quotechar=spec.quotechar,
+    table = load_table(spec.file, spec.format, csv_options=spec.csv_options,
                        time_column=spec.columns.get("time"))
-    return condition(table, spec, s_rated_mva)
+    return condition(table, spec, machine)
 
 
-def condition(table: Table, spec: MeasurementSpec, s_rated_mva: float = 1e9):
+def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = None):
     """:func:`read_measurement` after the file has been read (see the module docstring)."""
     src = table.source
     roles = _check_roles(spec, src)
     q: dict = {"file": src, "rows_read": 0}
+    if table.notes:
+        q["reader"] = dict(table.notes)
     raw = {role: table.column(spec.columns[role], role) for role in roles}
     names = {role: str(spec.columns[role]) for role in roles}
     n_rows = len(raw["time"])
@@ -145,11 +226,12 @@ def condition(table: Table, spec: MeasurementSpec, s_rated_mva: float = 1e9):
     t, q["time_format"], q["start_time"] = _parse_time(raw.pop("time"), spec, src, names["time"],
                                                       table.first_row)
     for role, values in raw.items():
+        if role in ("frequency", "stat", "valid"):
+            continue
         if not np.any(np.isfinite(values)):
-            if role == "frequency":
-                continue
             raise InputError(src, "every value is NaN or empty", column=names[role],
                              row=f"{rownum[0]}-{rownum[-1]}")
+    _check_stuck(raw, src, names)
 
     keep = np.isfinite(t)
     q["rows_without_time"] = int(np.sum(~keep))
@@ -159,88 +241,27 @@ def condition(table: Table, spec: MeasurementSpec, s_rated_mva: float = 1e9):
     dup = np.concatenate([[False], np.diff(t) == 0])
     q["duplicate_timestamps_dropped"] = int(np.sum(dup))
     order, t = order[~dup], t[~dup]
+    if order.size == n_rows and not q["out_of_order_rows"]:
+        order = slice(None)  # the file as it is: views instead of copies (long files)
     if t.size < 8:
         raise InputError(src, f"only {t.size} rows with a distinct time", column=names["time"])
+    rows = rownum[order]
 
-    v, i = _phasors(raw, order, spec, src, names)
-    f = raw["frequency"][order] if "frequency" in raw else None
-
-    dt = 1.0 / spec.frame_rate_hz if spec.frame_rate_hz else float(np.median(np.diff(t)))
     steps = np.diff(t)
+    dt = 1.0 / spec.frame_rate_hz if spec.frame_rate_hz else _median_step(t, steps)
+    _check_frame_rate(1.0 / dt, spec, src, names["time"])
     q["frame_rate_hz"] = 1.0 / dt
     q["non_uniform_steps"] = int(np.sum(np.abs(steps - dt) > 1e-6 * dt))
 
-    valid = np.isfinite(v) & np.isfinite(i)
+    v, i = _phasors(raw, order, spec, src, names)
+    f = raw["frequency"][order].astype(float) if "frequency" in raw else None
     q["nan_samples"] = {names[r]: int(np.sum(~np.isfinite(raw[r][order]))) for r in raw
-                        if np.any(~np.isfinite(raw[r][order]))}
-    if not np.any(valid):
+                        if r not in ("stat", "valid") and np.any(~np.isfinite(raw[r][order]))}
+    if not np.any(np.isfinite(v) & np.isfinite(i)):
         raise InputError(src, "no row has all phasor channels", row=f"{rownum[0]}-{rownum[-1]}")
-    tv, vv, iv, rows_v = t[valid], v[valid], i[valid], rownum[order][valid]
-    # Unwrap on the valid samples only, then interpolate magnitude and angle.
-    v_ang, i_ang = np.unwrap(np.angle(vv)), np.unwrap(np.angle(iv))
-    q["angle_wraps_unwrapped"] = int(np.sum(np.abs(np.diff(np.angle(vv))) > np.pi)
-                                     + np.sum(np.abs(np.diff(np.angle(iv))) > np.pi))
-
-    gap_len = np.diff(tv) - dt
-    is_gap = gap_len > 0.5 * dt
-    long_gap = gap_len > spec.max_gap_s + 1e-9 * dt
-    q["bridged_gaps"] = [{"start_s": round(float(tv[k] - t[0] + dt), 6),
-                          "length_s": round(float(gap_len[k]), 6), "row": int(rows_v[k] + 1)}
-                         for k in np.flatnonzero(is_gap & ~long_gap)]
-    if np.any(long_gap):
-        k = int(np.flatnonzero(long_gap)[0])
-        culprit = _gap_culprit(raw, order, valid, tv[k], tv[k + 1], t, names)
-        if spec.on_long_gap == "error":
-            raise InputError(src, f"gap of {gap_len[k]:.3f} s from t = {tv[k] - t[0] + dt:.3f} s is "
-                             f"longer than measurement.max_gap_s = {spec.max_gap_s} s",
-                             column=culprit, row=int(rows_v[k] + 1))
-    cuts = np.flatnonzero(long_gap) + 1
-    q["split_at_gaps"] = [{"start_s": round(float(tv[c - 1] - t[0] + dt), 6),
-                           "length_s": round(float(gap_len[c - 1]), 6), "row": int(rows_v[c - 1] + 1)}
-                          for c in cuts]
-    q["edge_rows_trimmed"] = int(np.flatnonzero(valid)[0] + (len(valid) - 1 - np.flatnonzero(valid)[-1]))
-
-    freq_source = "measured" if f is not None and np.any(np.isfinite(f)) else "derived from voltage angle"
-    if f is not None and not np.any(np.isfinite(f)):
-        q["frequency_all_nan"] = True
-    segments = []
-    dropped = []
-    for part in np.split(np.arange(tv.size), cuts):
-        t_part = tv[part]
-        n = int(np.floor((t_part[-1] - t_part[0]) / dt + 1e-6)) + 1
-        if (n - 1) * dt < spec.min_segment_s:
-            dropped.append({"start_s": round(float(t_part[0] - t[0]), 6),
-                            "length_s": round(float((n - 1) * dt), 6)})
-            continue
-        grid = t_part[0] + dt * np.arange(n)
-        rec_f = None
-        if freq_source == "measured":
-            ok = np.isfinite(f) & (t >= t_part[0]) & (t <= t_part[-1])
-            t_ok = np.concatenate([[t_part[0]], t[ok], [t_part[-1]]])
-            if ok.sum() > 1 and np.max(np.diff(t_ok)) <= spec.max_gap_s + dt * (1 + 1e-9):
-                rec_f = np.interp(grid, t[ok], f[ok])
-            else:
-                q["frequency_derived_in_segments_with_long_gaps"] = True
-        segments.append((float(t_part[0] - t[0]), Recording(
-            t_s=grid - grid[0],
-            v_mag_pu=np.interp(grid, t_part, np.abs(vv[part])),
-            v_ang_rad=np.interp(grid, t_part, v_ang[part]),
-            i_mag_pu=np.interp(grid, t_part, np.abs(iv[part])),
-            i_ang_rad=np.interp(grid, t_part, i_ang[part]),
-            f_hz=rec_f, location=spec.location)))
-    q["segments_dropped_short"] = dropped
-    if not segments:
-        raise InputError(src, f"no part of the recording is at least measurement.min_segment_s = "
-                         f"{spec.min_segment_s} s long between gaps longer than max_gap_s = "
-                         f"{spec.max_gap_s} s", column=names["v_mag" if "v_mag" in names else "v_a_mag"])
-    segments.sort(key=lambda s: -s[1].t_s.shape[0])
-    q["segments"] = [{"start_s": round(s0, 6), "duration_s": round(float(r.t_s[-1]), 6),
-                      "samples": int(r.t_s.shape[0])} for s0, r in segments]
-    q["resampled"] = bool(q["non_uniform_steps"] or q["duplicate_timestamps_dropped"]
-                          or q["out_of_order_rows"] or q["bridged_gaps"])
-    q["frequency"] = (f"measured ({names['frequency']})" if freq_source == "measured"
-                      else "derived from the voltage angle")
-    _plausibility(np.abs(vv), iv, vv, f, spec, s_rated_mva, src, names, q)
+    _plausibility(v, i, f, t, raw, order, spec, machine, src, names, q)
+    v, i, f = _screen(v, i, f, t, raw, order, rows, spec, machine, names, q)
+    segments = _segments(t, v, i, f, rows, raw, order, spec, src, names, q)
     q["units"] = {"voltage": spec.voltage_unit, "current": spec.current_unit,
                   "angle": spec.angle_unit, "time": q.pop("time_format"),
                   "v_base_kv": spec.v_base_kv, "s_base_mva": spec.s_base_mva,
@@ -248,11 +269,29 @@ def condition(table: Table, spec: MeasurementSpec, s_rated_mva: float = 1e9):
     return segments, q
 
 
+def _check_stuck(raw, src, names):
+    """A magnitude or frequency channel with one value in every row is a stuck channel (a
+    current of exactly 0 is an offline machine, reported downstream)."""
+    for role, values in raw.items():
+        if not (role == "frequency" or role.endswith("mag")):
+            continue
+        head = values[:1000][np.isfinite(values[:1000])]
+        if head.size > 1 and np.any(head != head[0]):
+            continue  # the usual case, decided on the first rows
+        x = values[np.isfinite(values)]
+        if x.size < 2 or np.any(x != x[0]) or (role.startswith("i_") and x[0] == 0):
+            continue
+        hint = ("; if the PMU does not compute frequency, leave measurement.columns.frequency out "
+                "(jaxdse derives it from the voltage angle)" if role == "frequency" else "")
+        raise InputError(src, f"holds one value ({x[0]:g}) in every row: a stuck channel{hint}",
+                         column=names[role])
+
+
 def _check_roles(spec: MeasurementSpec, src) -> list[str]:
     cols = spec.columns
     unknown = [k for k in cols if k not in COLUMN_ROLES]
     if unknown:
-        raise InputError(src, f"unknown column role; use {', '.join(COLUMN_ROLES[:6])} or "
+        raise InputError(src, f"unknown column role; use {', '.join(COLUMN_ROLES[:8])} or "
                          "v_a_mag ... i_c_ang", key=f"measurement.columns.{unknown[0]}")
     if "time" not in cols:
         raise InputError(src, "the time column is required", key="measurement.columns.time")
@@ -264,35 +303,121 @@ def _check_roles(spec: MeasurementSpec, src) -> list[str]:
     if missing:
         raise InputError(src, "required column mapping is missing",
                          key=f"measurement.columns.{missing[0]}")
-    return ["time"] + (["frequency"] if "frequency" in cols else []) + list(need)
+    if "stat" in cols and "valid" in cols:
+        raise InputError(src, "give either a STAT column or a data-valid column, not both",
+                         key="measurement.columns")
+    extra = [r for r in ("frequency", "stat", "valid") if r in cols]
+    return ["time"] + extra + list(need)
 
+
+# --- time -------------------------------------------------------------------------------------
 
 def _parse_time(raw, spec: MeasurementSpec, src, name, first_row):
+    """Seconds since the first row, the time format used, and the start time (ISO) if known."""
     if raw.dtype.kind in "fiu":
-        if spec.time_unit == "iso":
-            raise InputError(src, "time_unit is 'iso' but the column is numeric", column=name)
+        if spec.time_unit == "iso" or spec.time_format:
+            raise InputError(src, "the time column holds numbers, not timestamps: set "
+                             "measurement.time_unit = \"s\" or \"ms\"", column=name)
         scale = 1e-3 if spec.time_unit == "ms" else 1.0
         return raw.astype(float) * scale, spec.time_unit, None
-    out = np.empty(raw.shape[0])
-    start = None
-    for k, s in enumerate(raw):
-        if s in ("", "nan", "NaN"):
-            out[k] = np.nan
-            continue
-        try:
-            d = datetime.fromisoformat(s.replace("Z", "+00:00"))
-        except ValueError:
-            raise InputError(src, f"{s!r} is neither seconds nor an ISO 8601 timestamp",
-                             column=name, row=k + first_row) from None
-        if start is None:
-            start = d
-        try:
-            out[k] = (d - start).total_seconds()
-        except TypeError:
-            raise InputError(src, "timestamps mix time zones and naive times",
-                             column=name, row=k + first_row) from None
-    return out, "iso", start.isoformat() if start else None
+    import pandas as pd
 
+    text = pd.Series(raw, dtype=object)
+    blank = text.isin(("", "nan", "NaN", "NaT"))
+    fmt = spec.time_format or "ISO8601"
+    try:
+        parsed = pd.to_datetime(text.where(~blank), format=fmt, errors="coerce")
+    except ValueError as err:  # several time zones in one column
+        if any(w in str(err).lower() for w in ("mixed", "time zone", "timezone", "offset")):
+            raise InputError(src, "timestamps mix time zones and naive times", column=name) from None
+        raise InputError(src, f"timestamps cannot be read with format {fmt!r} ({err})",
+                         column=name) from None
+    if parsed.dtype == object:
+        raise InputError(src, "timestamps mix time zones and naive times", column=name)
+    bad = parsed.isna() & ~blank
+    if bad.any():
+        k = int(np.flatnonzero(bad.to_numpy())[0])
+        cell = str(text.iloc[k])
+        hint = ""
+        if spec.time_format is None and "/" in cell:
+            hint = ("; set measurement.time_format, e.g. \"%m/%d/%Y %H:%M:%S.%f\" (or %d/%m/%Y: "
+                    "day first)")
+        elif spec.time_format is None:
+            hint = "; set measurement.time_format (strftime codes) for other layouts"
+        what = "an ISO 8601 timestamp" if spec.time_format is None else f"a timestamp in {fmt!r}"
+        raise InputError(src, f"{cell!r} is neither seconds nor {what}{hint}", column=name,
+                         row=k + first_row)
+    zone = parsed.dt.tz
+    if zone is None and spec.timezone:
+        try:
+            parsed = parsed.dt.tz_localize(_zone(spec.timezone), ambiguous="raise",
+                                           nonexistent="raise")
+        except Exception as err:  # noqa: BLE001 (pandas raises several types here)
+            raise InputError(src, f"timestamps cannot be placed in time zone {spec.timezone!r} "
+                             f"({str(err).splitlines()[0]})", key="measurement.timezone") from None
+    ok = parsed.notna().to_numpy()
+    seconds = np.full(len(parsed), np.nan)
+    if ok.any():
+        first = parsed[ok].iloc[0]
+        seconds[ok] = (parsed[ok] - first).dt.total_seconds().to_numpy()
+        start = first.isoformat()
+    else:
+        start = None
+    label = "iso" if spec.time_format is None else f"timestamps {spec.time_format}"
+    if zone is None and not spec.timezone:
+        label += " (no time zone)"
+    return seconds, label, start
+
+
+def _zone(name: str):
+    """A time zone: an IANA name, "UTC", or a fixed offset "+hh:mm"."""
+    import datetime as _dt
+    import re
+
+    m = re.fullmatch(r"([+-])(\d{2}):?(\d{2})", name.strip())
+    if m:
+        sign = 1 if m.group(1) == "+" else -1
+        return _dt.timezone(sign * _dt.timedelta(hours=int(m.group(2)), minutes=int(m.group(3))))
+    return name
+
+
+def _check_system_rate(rate, spec: MeasurementSpec, src, name):
+    """Without a frequency channel: a reporting rate of the other system frequency (30 frames/s
+    with f_nominal 50 Hz, 25 frames/s with 60 Hz) means a wrong machine.f_nominal_hz."""
+    for f_sys, rates in SYSTEM_RATES_HZ.items():
+        if f_sys != spec.f_nominal_hz and any(abs(rate / r - 1) < 1e-3 for r in rates):
+            raise InputError(src, f"{rate:.4g} frames/s is a reporting rate of {f_sys:g} Hz systems "
+                             f"but machine.f_nominal_hz = {spec.f_nominal_hz:g} and no frequency "
+                             f"channel tells otherwise: set machine.f_nominal_hz = {f_sys:g}, or map "
+                             "the frequency column (measurement.columns.frequency)", column=name)
+
+
+def _median_step(t, steps) -> float:
+    """The median time step, refined to span / (whole number of steps) when the span is one
+    (the times of a long file are rounded: a grid of the median step would drift off them)."""
+    dt = float(np.median(steps))
+    k = round((t[-1] - t[0]) / dt)
+    return (t[-1] - t[0]) / k if abs((t[-1] - t[0]) / dt - k) < 1e-3 else dt
+
+
+def _check_frame_rate(rate, spec: MeasurementSpec, src, name):
+    lo, hi = FRAME_RATE_HZ
+    if lo <= rate <= hi:
+        return
+    hint = ""
+    if spec.time_unit == "s" and rate < lo and lo <= rate * 1e3 <= hi:
+        hint = ": the time looks like milliseconds; set measurement.time_unit = \"ms\""
+    elif spec.time_unit == "ms" and rate > hi and lo <= rate / 1e3 <= hi:
+        hint = ": the time looks like seconds; set measurement.time_unit = \"s\""
+    elif spec.frame_rate_hz:
+        hint = ": check measurement.frame_rate_hz"
+    else:
+        hint = f": check measurement.time_unit ({spec.time_unit!r})"
+    raise InputError(src, f"the median time step gives {rate:.4g} frames/s, outside the "
+                     f"{lo:g}-{hi:g} frames/s that PMUs report{hint}", column=name)
+
+
+# --- units ------------------------------------------------------------------------------------
 
 def _phasors(raw, order, spec: MeasurementSpec, src, names):
     """Positive-sequence V and I [pu, system base, generator convention] per kept row."""
@@ -324,39 +449,330 @@ def _phasors(raw, order, spec: MeasurementSpec, src, names):
     return v, i
 
 
+def _machine_scale(spec: MeasurementSpec, machine: Machine | None) -> float | None:
+    """pu of the machine rating per pu of the system base, if the machine is known."""
+    return None if machine is None else spec.s_base_mva / float(machine.s_rated_mva)
+
+
+# --- plausibility (whole recording) ------------------------------------------------------------
+
+def _plausibility(v, i, f, t, raw, order, spec: MeasurementSpec, machine, src, names, q):
+    fin = np.isfinite(v) & np.isfinite(i)
+    vm = float(np.median(np.abs(v[fin])))
+    vname = names.get("v_mag", names.get("v_a_mag"))
+    iname = names.get("i_mag", names.get("i_a_mag"))
+    aname = names.get("v_ang", names.get("v_a_ang"))
+    if not PLAUSIBLE_VOLTAGE_PU[0] <= vm <= PLAUSIBLE_VOLTAGE_PU[1]:
+        lo, hi = PLAUSIBLE_VOLTAGE_PU
+        vu = spec.voltage_unit
+        hint = ""
+        if vu.lower().endswith("_ll") and lo <= vm * np.sqrt(3) <= hi:
+            hint = f": the values look phase-to-ground, set voltage_unit = \"{vu[:-3]}_LN\""
+        elif vu.lower().endswith("_ln") and lo <= vm / np.sqrt(3) <= hi:
+            hint = f": the values look phase-to-phase, set voltage_unit = \"{vu[:-3]}_LL\""
+        raise InputError(src, f"median voltage is {vm:.4g} pu on v_base_kv = {spec.v_base_kv} kV: "
+                         f"check measurement.voltage_unit ({vu!r}) and v_base_kv{hint}",
+                         column=vname)
+    scale = _machine_scale(spec, machine)
+    if scale is not None:
+        im = float(np.median(np.abs(i[fin]))) * scale
+        q["median_current_pu_machine"] = round(im, 6)
+        if im > MAX_CURRENT_PU_MACHINE:
+            raise InputError(src, f"median current is {im:.4g} pu of the machine rating: check "
+                             f"measurement.current_unit ({spec.current_unit!r}) and the bases", column=iname)
+        s = v[fin] * np.conj(i[fin])
+        p = float(np.median(s.real)) * scale
+        q["median_p_pu_machine"] = round(p, 6)
+        s_mag = float(np.median(np.abs(s))) * scale
+        if 0 < im < MIN_CURRENT_PU_MACHINE and p > MIN_POWER_FACTOR * s_mag:
+            raise InputError(src, f"median current is {im:.3g} pu of the machine rating yet carries "
+                             f"power at power factor {p / s_mag:.2f}: a scale mistake; check "
+                             f"measurement.current_unit ({spec.current_unit!r}: kA?), a CT ratio "
+                             "(secondary amperes?) and the bases", column=iname)
+        if p < MIN_POWER_PU_MACHINE:
+            raise InputError(src, f"median active power is {p:.3g} pu (the plant absorbs power): if "
+                             "the current is measured towards the plant set "
+                             "measurement.current_direction = \"into_plant\"", column=iname)
+        _check_voltage_base(spec, machine, src, vname)
+    f0 = spec.f_nominal_hz
+    if f is not None and np.any(np.isfinite(f)):
+        fm = float(np.nanmedian(f))
+        if abs(fm - f0) > MAX_FREQUENCY_OFFSET * f0:
+            raise InputError(src, f"median frequency is {fm:.4g} Hz but machine.f_nominal_hz is "
+                             f"{f0}: check machine.f_nominal_hz, and that the channel is in Hz",
+                             column=names["frequency"])
+    else:
+        _check_system_rate(1.0 / np.median(np.diff(t)), spec, src, names["time"])
+    _check_angles(v, t, f, raw, order, spec, src, aname, q)
+
+
+def _check_voltage_base(spec: MeasurementSpec, machine: Machine, src, vname):
+    """The PMU voltage base against the machine's rated voltage for the declared location."""
+    if not spec.v_base_kv:
+        return  # voltages in pu: the base is not stated, nothing to compare
+    ratio = spec.v_base_kv / float(machine.v_rated_kv)
+    rated = f"machine.v_rated_kv = {float(machine.v_rated_kv):g} kV"
+    if spec.location == "terminal" and not TERMINAL_BASE_RATIO[0] <= ratio <= TERMINAL_BASE_RATIO[1]:
+        raise InputError(src, f"location = \"terminal\" but v_base_kv = {spec.v_base_kv:g} kV and "
+                         f"{rated}: a PMU on the HV side needs location = \"hv\" or \"substation\"",
+                         key="measurement.location")
+    if spec.location != "terminal" and ratio < HV_BASE_RATIO:
+        raise InputError(src, f"location = {spec.location!r} but v_base_kv = {spec.v_base_kv:g} kV is "
+                         f"the machine's voltage ({rated}): at the terminal, set location = \"terminal\"",
+                         key="measurement.location")
+
+
+def _check_angles(v, t, f, raw, order, spec: MeasurementSpec, src, aname, q):
+    """Angle steps and drift against the declared angle unit and f_nominal."""
+    fin = np.isfinite(v)
+    tv, ang = t[fin], _unwrap(np.angle(v[fin]))
+    if tv.size < 3:
+        return
+    step = np.abs(np.diff(ang))
+    contiguous = np.diff(tv) < 1.5 * np.median(np.diff(tv))
+    raw_ang = np.asarray(raw[_angle_role(raw)][order], dtype=float)[fin]
+    raw_steps = np.abs(np.diff(raw_ang))
+    unit = spec.angle_unit.lower()
+    if unit == "rad" and (np.any(np.abs(raw_steps - 360.0) < 10.0)
+                          or np.mean(step[contiguous] > MAX_ANGLE_STEP_RAD) > OUTLIER_SHARE):
+        k = int(np.argmax(np.where(contiguous, step, 0)))
+        raise InputError(src, f"the voltage angle jumps by {raw_steps[k]:.4g} between rows (as "
+                         "radians, not physical): the angles look like degrees; set "
+                         "measurement.angle_unit = \"deg\"", column=aname)
+    if unit == "deg" and np.mean(np.abs(raw_ang) <= np.pi + 1e-3) >= 1 - OUTLIER_SHARE and \
+            np.any(np.abs(raw_steps - 2 * np.pi) < 0.2):
+        raise InputError(src, "the voltage angle stays within +-3.14 and wraps at +-pi: the angles "
+                         "look like radians; set measurement.angle_unit = \"rad\"", column=aname)
+    if contiguous.any():
+        rate = float(np.median(np.diff(ang)[contiguous] / np.diff(tv)[contiguous])) / (2 * np.pi)
+        q["voltage_angle_drift_hz"] = round(rate, 6)
+        if abs(rate) > MAX_ANGLE_DRIFT_HZ:
+            raise InputError(src, f"the voltage angle turns at {rate:.3g} Hz against the nominal "
+                             f"frequency {spec.f_nominal_hz:g} Hz (grids stay within a fraction of a "
+                             "hertz): check machine.f_nominal_hz and measurement.angle_unit",
+                             column=aname)
+
+
+def _angle_role(raw) -> str:
+    return "v_ang" if "v_ang" in raw else "v_a_ang"
+
+
+# --- screening (single samples) ----------------------------------------------------------------
+
+def _runs(mask):
+    """(start, stop) index pairs of the runs of True in ``mask``."""
+    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
+    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)
+
+
+def _spikes(x, floor):
+    """Samples of ``x`` that deviate from a running median by more than ``SPIKE_SIGMAS`` robust
+    standard deviations (and ``floor``), in runs of at most ``SPIKE_MAX_SAMPLES`` (Hampel)."""
+    from scipy.ndimage import median_filter
+
+    fin = np.isfinite(x)
+    if fin.sum() < 2 * SPIKE_HALF_WIDTH + 1:
+        return np.zeros(x.shape, bool)
+    idx = np.arange(x.size)
+    xf = x if fin.all() else np.where(fin, x, np.interp(idx, idx[fin], x[fin]))
+    hw, size = SPIKE_HALF_WIDTH, 2 * SPIKE_HALF_WIDTH + 1
+    med = median_filter(_extend(xf, hw), size=size, mode="nearest")[hw:-hw]
+    dev = np.abs(xf - med)
+    mad = median_filter(dev, size=size, mode="mirror")
+    out = fin & (dev > np.maximum(SPIKE_SIGMAS * 1.4826 * mad, floor))
+    for a, b in zip(*_runs(out)):
+        if b - a > SPIKE_MAX_SAMPLES:
+            out[a:b] = False
+    return out
+
+
+def _extend(x, hw):
+    """``x`` with ``hw`` samples added at each end on a robust (Theil-Sen) line through its
+    first and last ``2 hw + 1`` samples: the running median then follows a trend up to the
+    edges (a ramp gives no deviation) and a spike in the first or last samples stands out."""
+    m = 2 * hw + 1
+    k = np.arange(m)
+    a, b = np.triu_indices(m, 1)
+
+    def line(y, at):
+        slope = np.median((y[b] - y[a]) / (b - a))
+        return np.median(y - slope * k) + slope * at
+
+    return np.concatenate([line(x[:m], np.arange(-hw, 0)), x, line(x[-m:], np.arange(m, m + hw))])
+
+
+def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names, q):
+    """Mask invalid rows, out-of-range samples and spikes (they become gaps); report them."""
+    report = {}
+
+    def note(kind, column, mask):
+        if mask.any():
+            k = int(np.flatnonzero(mask)[0])
+            report.setdefault(kind, {})[column] = {"samples": int(mask.sum()), "first_row": int(rows[k])}
+
+    bad_v = np.zeros(v.shape, bool)
+    bad_i = np.zeros(i.shape, bool)
+    if "stat" in raw:
+        word = np.nan_to_num(raw["stat"][order], nan=0xFFFF).astype(np.int64)
+        invalid = (word & STAT_INVALID_BITS) != 0
+        note("stat_invalid", names["stat"], invalid)
+        bad_v |= invalid
+        bad_i |= invalid
+    if "valid" in raw:
+        flag = raw["valid"][order]
+        invalid = ~(np.isfinite(flag) & (flag != 0))
+        note("flagged_invalid", names["valid"], invalid)
+        bad_v |= invalid
+        bad_i |= invalid
+    vname = names.get("v_mag", names.get("v_a_mag"))
+    iname = names.get("i_mag", names.get("i_a_mag"))
+    vm, im = np.abs(v), np.abs(i)
+    out_v = np.isfinite(vm) & ((vm < VOLTAGE_RANGE_PU[0]) | (vm > VOLTAGE_RANGE_PU[1]))
+    note("out_of_range", vname, out_v)
+    bad_v |= out_v
+    scale = _machine_scale(spec, machine)
+    if scale is not None:
+        out_i = np.isfinite(im) & (im * scale > MAX_CURRENT_SAMPLE_PU_MACHINE)
+        note("out_of_range", iname, out_i)
+        bad_i |= out_i
+    # Spikes in magnitude and (detrended) angle of each phasor; one in the voltage and the
+    # current at once is a disturbance of the plant, not a measurement error.
+    ok_v, ok_i = np.isfinite(v) & ~bad_v, np.isfinite(i) & ~bad_i
+    sv = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(vm[ok_v])) | \
+        _spikes(_unwrapped(v, ok_v), SPIKE_FLOOR["angle_rad"])
+    si = _spikes(np.where(ok_i, im, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(im[ok_i])) | \
+        _spikes(_unwrapped(i, ok_i), SPIKE_FLOOR["angle_rad"])
+    both = sv & si
+    note("spikes", vname, sv & ~both)
+    note("spikes", iname, si & ~both)
+    bad_v |= sv & ~both
+    bad_i |= si & ~both
+    if f is not None:
+        fname = names["frequency"]
+        out_f = np.isfinite(f) & (np.abs(f - spec.f_nominal_hz) > MAX_FREQUENCY_SAMPLE_OFFSET_HZ)
+        note("out_of_range", fname, out_f)
+        f = np.where(out_f, np.nan, f)
+        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"])
+        note("spikes", fname, sf)
+        f = np.where(sf, np.nan, f)
+    bad = bad_v | bad_i
+    report["masked_samples"] = int(bad.sum())
+    q["screening"] = report
+    return np.where(bad, np.nan, v), np.where(bad, np.nan, i), f
+
+
+def _unwrap(a):
+    """np.unwrap for 1-d angles [rad], in fewer passes (whole multiples of 2 pi are removed)."""
+    out = a.copy()
+    if a.size > 1:
+        out[1:] -= 2 * np.pi * np.cumsum(np.round(np.diff(a) / (2 * np.pi)))
+    return out
+
+
+def _unwrapped(x, ok):
+    """Unwrapped angle of the samples ``ok`` (NaN elsewhere)."""
+    out = np.full(x.shape, np.nan)
+    out[ok] = _unwrap(np.angle(x[ok]))
+    return out
+
+
+# --- gaps, splitting, resampling --------------------------------------------------------------
+
+def _segments(t, v, i, f, rows, raw, order, spec: MeasurementSpec, src, names, q):
+    dt = 1.0 / q["frame_rate_hz"]
+    valid = np.isfinite(v) & np.isfinite(i)
+    if not np.any(valid):
+        raise InputError(src, "no row has all phasor channels after screening",
+                         row=f"{rows[0]}-{rows[-1]}")
+    tv, vv, iv, rows_v = t[valid], v[valid], i[valid], rows[valid]
+    # Unwrap on the valid samples only, then interpolate magnitude and angle.
+    v_ang, i_ang = _unwrap(np.angle(vv)), _unwrap(np.angle(iv))
+    q["angle_wraps_unwrapped"] = int(np.sum(np.abs(np.diff(np.angle(vv))) > np.pi)
+                                     + np.sum(np.abs(np.diff(np.angle(iv))) > np.pi))
+    gap_len = np.diff(tv) - dt
+    is_gap = gap_len > 0.5 * dt
+    long_gap = gap_len > spec.max_gap_s + 1e-9 * dt
+    q["bridged_gaps"] = [{"start_s": round(float(tv[k] - t[0] + dt), 6),
+                          "length_s": round(float(gap_len[k]), 6), "row": int(rows_v[k] + 1)}
+                         for k in np.flatnonzero(is_gap & ~long_gap)]
+    if np.any(long_gap):
+        k = int(np.flatnonzero(long_gap)[0])
+        if spec.on_long_gap == "error":
+            culprit = _gap_culprit(raw, order, valid, tv[k], tv[k + 1], t, names)
+            raise InputError(src, f"gap of {gap_len[k]:.3f} s from t = {tv[k] - t[0] + dt:.3f} s is "
+                             f"longer than measurement.max_gap_s = {spec.max_gap_s} s",
+                             column=culprit, row=int(rows_v[k] + 1))
+    cuts = np.flatnonzero(long_gap) + 1
+    q["split_at_gaps"] = [{"start_s": round(float(tv[c - 1] - t[0] + dt), 6),
+                           "length_s": round(float(gap_len[c - 1]), 6), "row": int(rows_v[c - 1] + 1)}
+                          for c in cuts]
+    q["edge_rows_trimmed"] = int(np.flatnonzero(valid)[0] + (len(valid) - 1 - np.flatnonzero(valid)[-1]))
+    measured_f = f is not None and np.any(np.isfinite(f))
+    if f is not None and not measured_f:
+        q["frequency_all_nan"] = True
+    q["frequency"] = (f"measured ({names['frequency']})" if measured_f
+                      else "derived from the voltage angle")
+    segments, dropped = [], []
+    for part in np.split(np.arange(tv.size), cuts):
+        t_part = tv[part]
+        n = int(np.floor((t_part[-1] - t_part[0]) / dt + 1e-3)) + 1  # rounding of long files
+        if (n - 1) * dt < spec.min_segment_s:
+            dropped.append({"start_s": round(float(t_part[0] - t[0]), 6),
+                            "length_s": round(float((n - 1) * dt), 6)})
+            continue
+        grid = t_part[0] + dt * np.arange(n)
+        exact = _on_grid(grid, t_part, dt)  # a uniform file, the common case: no interpolation
+
+        def on_grid(x, exact=exact, grid=grid, t_part=t_part):
+            return x if exact else np.interp(grid, t_part, x)
+
+        segments.append((float(t_part[0] - t[0]), Recording(
+            t_s=grid - grid[0],
+            v_mag_pu=on_grid(np.abs(vv[part])), v_ang_rad=on_grid(v_ang[part]),
+            i_mag_pu=on_grid(np.abs(iv[part])), i_ang_rad=on_grid(i_ang[part]),
+            f_hz=_frequency_on(grid, t, f, spec.max_gap_s, dt, q) if measured_f else None,
+            location=spec.location)))
+    q["segments_dropped_short"] = dropped
+    if not segments:
+        raise InputError(src, f"no part of the recording is at least measurement.min_segment_s = "
+                         f"{spec.min_segment_s} s long between gaps longer than max_gap_s = "
+                         f"{spec.max_gap_s} s", column=names["v_mag" if "v_mag" in names else "v_a_mag"])
+    segments.sort(key=lambda s: -s[1].t_s.shape[0])
+    q["segments"] = [{"start_s": round(s0, 6), "duration_s": round(float(r.t_s[-1]), 6),
+                      "samples": int(r.t_s.shape[0])} for s0, r in segments]
+    q["resampled"] = bool(q["non_uniform_steps"] or q["duplicate_timestamps_dropped"]
+                          or q["out_of_order_rows"] or q["bridged_gaps"])
+    return segments
+
+
+def _on_grid(grid, t, dt) -> bool:
+    """Are the times ``t`` the points of ``grid`` (to 1e-6 of a step)?"""
+    return t.size == grid.size and bool(np.max(np.abs(t - grid)) <= 1e-6 * dt)
+
+
+def _frequency_on(grid, t, f, max_gap_s, dt, q):
+    """The frequency channel on ``grid``: interpolated across gaps up to ``max_gap_s``, NaN in
+    longer ones (the pipeline then derives f from the voltage angle there)."""
+    ok = np.isfinite(f)
+    if ok.all() and _on_grid(grid, t, dt):
+        return f
+    t_ok, f_ok = t[ok], f[ok]
+    j = np.clip(np.searchsorted(t_ok, grid), 0, t_ok.size - 1)
+    before = t_ok[np.maximum(j - 1, 0)]
+    span = np.where(t_ok[j] == grid, 0.0, t_ok[j] - before)
+    far = (span > max_gap_s + dt * (1 + 1e-9)) | (grid < t_ok[0]) | (grid > t_ok[-1])
+    if far.any():
+        q["frequency_derived_in_long_gaps_s"] = round(float(far.sum() * dt), 6)
+    return np.where(far, np.nan, np.interp(grid, t_ok, f_ok))
+
+
 def _gap_culprit(raw, order, valid, t_lo, t_hi, t, names) -> str:
     """Name the first phasor column that is NaN inside the gap, else the time column."""
     inside = (t > t_lo) & (t < t_hi) & ~valid
     for role in raw:
-        if role != "frequency" and np.any(inside & ~np.isfinite(raw[role][order])):
+        if role not in ("frequency", "stat", "valid") and np.any(inside & ~np.isfinite(raw[role][order])):
             return names[role]
     return names["time"]
-
-
-def _plausibility(v_mag, i, v, f, spec: MeasurementSpec, s_rated_mva, src, names, q):
-    vm = float(np.median(v_mag))
-    vname = names.get("v_mag", names.get("v_a_mag"))
-    iname = names.get("i_mag", names.get("i_a_mag"))
-    if not PLAUSIBLE_VOLTAGE_PU[0] <= vm <= PLAUSIBLE_VOLTAGE_PU[1]:
-        raise InputError(src, f"median voltage is {vm:.4g} pu on v_base_kv = {spec.v_base_kv} kV: "
-                         f"check measurement.voltage_unit ({spec.voltage_unit!r}) and v_base_kv",
-                         column=vname)
-    im = float(np.median(np.abs(i))) * spec.s_base_mva / s_rated_mva
-    q["median_current_pu_machine"] = round(im, 6)
-    if im > MAX_CURRENT_PU_MACHINE:
-        raise InputError(src, f"median current is {im:.4g} pu of the machine rating: check "
-                         f"measurement.current_unit ({spec.current_unit!r}) and the bases", column=iname)
-    p = float(np.median(np.real(v * np.conj(i)))) * spec.s_base_mva / s_rated_mva
-    q["median_p_pu_machine"] = round(p, 6)
-    if p < MIN_POWER_PU_MACHINE:
-        raise InputError(src, f"median active power is {p:.3g} pu (the plant absorbs power): if the "
-                         "current is measured towards the plant set measurement.current_direction = "
-                         "\"into_plant\"", column=iname)
-    if f is not None and np.any(np.isfinite(f)):
-        fm = float(np.nanmedian(f))
-        if abs(fm - spec.f_nominal_hz) > MAX_FREQUENCY_OFFSET * spec.f_nominal_hz:
-            raise InputError(src, f"median frequency is {fm:.4g} Hz but machine.f_nominal_hz is "
-                             f"{spec.f_nominal_hz}: the channel must be in Hz", column=names["frequency"])
 
 
 def phasor_columns(rec: Recording, spec: MeasurementSpec, v_abc=None, i_abc=None) -> dict[str, np.ndarray]:
@@ -390,4 +806,3 @@ def phasor_columns(rec: Recording, spec: MeasurementSpec, v_abc=None, i_abc=None
             cols[spec.columns[f"{qn}_{p}_mag"]] = np.abs(x[:, k]) * scale
             cols[spec.columns[f"{qn}_{p}_ang"]] = wrap(np.angle(s * x[:, k]))
     return cols
-

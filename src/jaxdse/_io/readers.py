@@ -2,8 +2,16 @@
 
 Each reader turns one file into a :class:`Table`: named columns of raw values, in file units
 and file row order. Units, time handling and the positive sequence are applied afterwards by
-:mod:`._measurement`. Every user mistake raises :class:`InputError`, a one-line message that
+``measurement``. Every user mistake raises :class:`InputError`, a one-line message that
 names the file, the column or key, and the row.
+
+CSV exports come in many layouts. The reader handles, and reports in ``Table.notes``: a
+UTF-8 byte-order mark (Excel "CSV UTF-8"), Windows line ends, a latin-1 encoding, the
+separator (sniffed from the header when not given: comma, semicolon, tab, pipe or
+whitespace), a decimal comma (with a semicolon, tab or whitespace separator), a units row
+under the header, metadata lines before it (``skip_rows``, or lines starting with ``#``),
+unnamed empty columns (trailing separators), and the usual words for a missing value. The
+numbers are parsed by pandas' C reader (24 h at 50 frames/s, 4.3 million rows, in a few s).
 """
 
 from __future__ import annotations
@@ -11,6 +19,7 @@ from __future__ import annotations
 import csv
 import functools
 import gzip
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,6 +28,28 @@ import numpy as np
 from .errors import InputError
 
 FORMATS = ("csv", "comtrade", "mat")
+NA_WORDS = ("", "nan", "NaN", "NAN", "na", "NA", "n/a", "N/A", "null", "NULL", "None", "-", "--",
+            "#N/A", "#VALUE!", "inf", "-inf")
+"""Cells read as a missing value (NaN) in every CSV; ``CsvOptions.na_values`` adds more."""
+SEPARATORS = {",": "comma", ";": "semicolon", "\t": "tab", "|": "pipe"}
+
+
+@dataclass(frozen=True)
+class CsvOptions:
+    """How to read a CSV/text export (the CSV keys of [measurement]). None: detect it."""
+
+    delimiter: str | None = None
+    """Field separator: ",", ";", "\\t", "|" or "whitespace"; None sniffs it from the header."""
+    quotechar: str = '"'
+    decimal: str | None = None
+    """"." or ","; None: "," when the cells look like "50,01" with a non-comma separator."""
+    na_values: tuple[str, ...] = ()
+    """Words that mean a missing value, beside ``NA_WORDS``."""
+    skip_rows: int = 0
+    """Lines to skip before the header (metadata); lines starting with "#" are skipped anyway."""
+    units_row: bool | None = None
+    """A row of units under the header; None: detected (a non-numeric first row whose numeric
+    columns parse from the next row on)."""
 
 
 @dataclass
@@ -34,6 +65,8 @@ class Table:
     """Row number (1-based, as a user counts rows in the file) of the first data row."""
     ambiguous: frozenset = frozenset()
     """Names the header repeats; the repeats are named "name#2", ... and the bare name is refused."""
+    notes: dict = field(default_factory=dict)
+    """What the reader detected and handled (separator, BOM, decimal comma, units row, ...)."""
 
     def column(self, name: str | int, role: str) -> np.ndarray:
         """The column ``name`` (or 0-based position), or an InputError naming ``role``."""
@@ -55,7 +88,7 @@ class Table:
         return self.columns[name]
 
 
-def load_table(paths, fmt: str | None = None, *, delimiter: str = ",", quotechar: str = '"',
+def load_table(paths, fmt: str | None = None, *, csv_options: CsvOptions = CsvOptions(),
                time_column: str | int | None = None) -> Table:
     """Read one file, or several files with the same time axis, into one :class:`Table`.
 
@@ -64,12 +97,11 @@ def load_table(paths, fmt: str | None = None, *, delimiter: str = ",", quotechar
     Arguments:
         paths: a path or a list of paths.
         fmt: "csv", "comtrade" or "mat"; None infers it from the extension.
-        delimiter: CSV field separator; "whitespace" for space-aligned text.
-        quotechar: CSV quote character.
-        time_column: the time column, kept as text when it is not numeric (ISO timestamps).
+        csv_options: separator, decimal mark, missing-value words, rows to skip, units row.
+        time_column: the time column, kept as text when it is not numeric (timestamps).
     """
     paths = [Path(p) for p in ([paths] if isinstance(paths, (str, Path)) else paths)]
-    tables = [_load_cached(p, _mtime(p), fmt, delimiter, quotechar, time_column) for p in paths]
+    tables = [_load_cached(p, _mtime(p), fmt, csv_options, time_column) for p in paths]
     if len(tables) == 1:
         return tables[0]
     columns, units = {}, {}
@@ -84,7 +116,7 @@ def load_table(paths, fmt: str | None = None, *, delimiter: str = ",", quotechar
                 units[f"{p.stem}/{name}"] = tab.units[name]
     ambiguous = frozenset(f"{p.stem}/{a}" for p, tab in zip(paths, tables) for a in tab.ambiguous)
     return Table(source=" + ".join(map(str, paths)), columns=columns, units=units,
-                 first_row=tables[0].first_row, ambiguous=ambiguous)
+                 first_row=tables[0].first_row, ambiguous=ambiguous, notes=tables[0].notes)
 
 
 def _mtime(path: Path):
@@ -92,12 +124,12 @@ def _mtime(path: Path):
 
 
 @functools.lru_cache(maxsize=8)
-def _load_cached(path: Path, mtime, fmt, delimiter, quotechar, time_column) -> Table:
+def _load_cached(path: Path, mtime, fmt, csv_options, time_column) -> Table:
     """One file read once per run, however many generators share it (``mtime`` keys changes)."""
-    return _load_one(path, fmt, delimiter, quotechar, time_column)
+    return _load_one(path, fmt, csv_options, time_column)
 
 
-def _load_one(path: Path, fmt, delimiter, quotechar, time_column) -> Table:
+def _load_one(path: Path, fmt, csv_options: CsvOptions, time_column) -> Table:
     if fmt is None:
         fmt = _format_from_suffix(path)
     if fmt not in FORMATS:
@@ -106,7 +138,7 @@ def _load_one(path: Path, fmt, delimiter, quotechar, time_column) -> Table:
     if not path.exists():
         raise InputError(path, "file does not exist")
     if fmt == "csv":
-        return _read_csv(path, delimiter, quotechar, time_column)
+        return _read_csv(path, csv_options, time_column)
     if fmt == "comtrade":
         return _read_comtrade(path)
     return _read_mat(path)
@@ -126,40 +158,176 @@ def _format_from_suffix(path: Path) -> str:
 
 # --- CSV ------------------------------------------------------------------------------------
 
-def _read_csv(path: Path, delimiter: str, quotechar: str, time_column) -> Table:
-    opener = gzip.open if path.suffix.lower() == ".gz" else open
-    with opener(path, "rt", newline="") as fh:
-        lines = [ln for ln in fh if ln.strip() and not ln.lstrip().startswith("#")]
-    if not lines:
-        raise InputError(path, "the file is empty")
-    if delimiter == "whitespace":
-        reader = csv.reader((ln.strip() for ln in lines), delimiter=" ", quotechar=quotechar,
-                            skipinitialspace=True)
-    else:
-        reader = csv.reader(lines, delimiter=delimiter, quotechar=quotechar, skipinitialspace=True)
-    rows = list(reader)
-    header = [h.strip() for h in rows[0]]
-    body = rows[1:]
-    if not body:
+def _read_csv(path: Path, opt: CsvOptions, time_column) -> Table:
+    gz = path.suffix.lower() == ".gz"
+    with (gzip.open if gz else open)(path, "rb") as fh:
+        head = fh.read(1 << 16)
+    notes = {}
+    encoding = "utf-8-sig"
+    if head.startswith(b"\xef\xbb\xbf"):
+        head, notes["byte_order_mark"] = head[3:], "stripped (UTF-8 BOM)"
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError as err:
+        if err.start < len(head) - 4:  # not just a character cut at the end of the head
+            encoding, notes["encoding"] = "latin-1", "latin-1 (not UTF-8)"
+        text = head.decode(encoding.replace("-sig", ""), errors="replace")
+    lines = text.split("\n")
+    if len(head) == 1 << 16:
+        lines = lines[:-1]  # the last line of the head may be cut
+    if "\r\n" in text:
+        notes["line_ends"] = "CRLF (Windows)"
+    # Metadata lines before the header: skip_rows, then blank and "#" comment lines.
+    k = opt.skip_rows
+    while k < len(lines) and (not lines[k].strip() or lines[k].lstrip().startswith("#")):
+        k += 1
+    if k >= len(lines):
+        raise InputError(path, "the file is empty" if not text.strip() else "no header line found")
+    if k:
+        notes["skipped_lines"] = f"{k} line(s) before the header (skip_rows = {opt.skip_rows}, " \
+            "then blank and '#' lines)"
+    sep = opt.delimiter or _sniff_separator(lines[k:k + 20])
+    if opt.delimiter is None:
+        notes["separator"] = f"{SEPARATORS.get(sep, repr(sep))} (detected)"
+    header, ambiguous = _dedupe([h.strip() for h in _split_line(lines[k], sep, opt.quotechar)])
+    body = k + 1  # 0-based line index of the first line after the header
+    while body < len(lines) and not lines[body].strip():
+        body += 1
+    rows = [_split_line(lines[j], sep, opt.quotechar) for j in range(body, min(body + 2, len(lines)))
+            if lines[j].strip()]
+    if not rows:
         raise InputError(path, "the file has a header but no data rows")
-    header, ambiguous = _dedupe(header)
-    for k, r in enumerate(body):
-        if len(r) != len(header):
-            raise InputError(path, f"has {len(r)} fields but the header has {len(header)}",
-                             row=k + 2)
-    cols = list(zip(*body))
-    time_name = header[time_column] if isinstance(time_column, int) else time_column
+    decimal = opt.decimal or _detect_decimal(sep, rows[-1])
+    if opt.decimal is None and decimal == ",":
+        notes["decimal"] = "comma (detected)"
+    if decimal == "," and sep == ",":
+        raise InputError(path, "a decimal comma needs another separator than the comma; set "
+                         "measurement.delimiter", key="measurement.decimal")
+    na = set(NA_WORDS) | set(opt.na_values)
+    units_row = opt.units_row
+    if units_row is None:
+        units_row = len(rows) == 2 and _looks_like_units(rows[0], rows[1], na, decimal)
+        if units_row:
+            notes["units_row"] = "detected under the header and read as units"
+    units = {}
+    if units_row:
+        units = {h: u.strip() for h, u in zip(header, rows[0]) if u.strip()}
+        body += 1
+    columns = _parse_body(path, body, header, sep, opt.quotechar, decimal, na, time_column, encoding)
+    empty = [h for h, raw in zip(header, _split_line(lines[k], sep, opt.quotechar))
+             if not raw.strip() and columns[h].dtype.kind == "f" and np.all(np.isnan(columns[h]))]
+    if empty:
+        notes["empty_columns"] = f"{len(empty)} unnamed column(s) without values ignored " \
+            "(separators at the ends of the lines)"
+        columns = {h: c for h, c in columns.items() if h not in empty}
+    return Table(source=str(path), columns=columns, units=units, first_row=body + 1,
+                 ambiguous=ambiguous, notes=notes)
+
+
+def _split_line(line: str, sep: str, quotechar: str) -> list[str]:
+    if sep == "whitespace":
+        return next(csv.reader([line.strip()], delimiter=" ", quotechar=quotechar, skipinitialspace=True))
+    return next(csv.reader([line.rstrip("\r\n")], delimiter=sep, quotechar=quotechar))
+
+
+def _sniff_separator(lines: list[str]) -> str:
+    """The separator that splits the header and the next lines into the same, largest count."""
+    sample = [ln for ln in lines if ln.strip() and not ln.lstrip().startswith("#")][:10]
+    best, best_count = None, 1
+    for sep in (",", ";", "\t", "|"):
+        counts = {len(_split_line(ln, sep, '"')) for ln in sample}
+        if len(counts) == 1 and (n := counts.pop()) > best_count:
+            best, best_count = sep, n
+    if best is None:
+        counts = {len(ln.split()) for ln in sample}
+        if len(counts) == 1 and counts.pop() > 1:
+            return "whitespace"
+        return ","
+    return best
+
+
+_DECIMAL_COMMA = re.compile(r"^\s*[-+]?\d+,\d+([eE][-+]?\d+)?\s*$")
+
+
+def _detect_decimal(sep: str, row: list[str]) -> str:
+    if sep == ",":
+        return "."
+    return "," if any(_DECIMAL_COMMA.match(c) for c in row) else "."
+
+
+def _number(cell: str, na: set, decimal: str):
+    cell = cell.strip()
+    if cell in na:
+        return np.nan
+    try:
+        return float(cell.replace(",", ".") if decimal == "," else cell)
+    except ValueError:
+        return None
+
+
+def _looks_like_units(first: list[str], second: list[str], na: set, decimal: str) -> bool:
+    """A first data row that is not numeric in columns whose next row is numeric."""
+    if not first or not second or len(first) != len(second):
+        return False
+    flips = [_number(a, na, decimal) is None and _number(b, na, decimal) is not None
+             for a, b in zip(first, second)]
+    return sum(flips) >= max(2, len(first) // 2)
+
+
+def _parse_body(path, skip: int, header, sep, quotechar, decimal, na, time_column, encoding):
+    """The data lines after the first ``skip`` lines, one array per column (pandas' C reader)."""
+    import pandas as pd
+
+    first_row = skip + 1
+
+    time_name = header[time_column] if isinstance(time_column, int) and 0 <= time_column < len(header) \
+        else time_column
+    kwargs = dict(header=None, names=header, index_col=False, quotechar=quotechar, decimal=decimal,
+                  na_values=sorted(na), keep_default_na=False, skip_blank_lines=True, skiprows=skip,
+                  engine="c", skipinitialspace=True, sep=r"\s+" if sep == "whitespace" else sep,
+                  encoding=encoding, encoding_errors="replace", comment=None)
+    try:
+        frame = pd.read_csv(path, **kwargs)
+    except pd.errors.ParserError as err:
+        m = re.search(r"Expected (\d+) fields in line (\d+), saw (\d+)", str(err))
+        if m:
+            hint = ""
+            if int(m.group(1)) < int(m.group(3)) and int(m.group(2)) <= first_row + 20:
+                hint = ": lines before the header? set measurement.skip_rows"
+            raise InputError(path, f"has {m.group(3)} fields but the header has {m.group(1)}{hint}",
+                             row=int(m.group(2))) from None
+        raise InputError(path, f"cannot be read as CSV ({str(err).splitlines()[0]})") from None
     columns = {}
-    for name, raw in zip(header, cols):
-        values = _parse_numbers(raw)
-        if values is None:
-            if name == time_name:
-                columns[name] = np.array([s.strip() for s in raw], dtype=str)
-                continue
-            bad = next(k for k, s in enumerate(raw) if _to_float(s) is None)
-            raise InputError(path, f"value {raw[bad]!r} is not a number", column=name, row=bad + 2)
-        columns[name] = values
-    return Table(source=str(path), columns=columns, first_row=2, ambiguous=ambiguous)
+    for name in header:
+        col = frame[name]
+        if name == time_name and col.dtype.kind not in "fiu":
+            text = col.astype(object)
+            numeric = pd.to_numeric(text.str.replace(",", ".") if decimal == "," else text,
+                                    errors="coerce")
+            if numeric.notna().sum() == text.notna().sum():  # plain numbers after all
+                columns[name] = numeric.to_numpy(dtype=float)
+            else:
+                columns[name] = text.fillna("").to_numpy(dtype=str)
+            continue
+        if col.dtype.kind in "fiu":
+            columns[name] = col.to_numpy(dtype=float)
+            continue
+        values = pd.to_numeric(col, errors="coerce")
+        bad = values.isna() & col.notna()
+        if bad.any():
+            k = int(np.flatnonzero(bad.to_numpy())[0])
+            cell = str(col.iloc[k])
+            hint = ""
+            if sep == "," and re.fullmatch(r"[-+]?\d+;\S*", cell):
+                hint = "; the separator may be ';' (set measurement.delimiter)"
+            elif decimal == "." and _DECIMAL_COMMA.match(cell):
+                hint = "; a decimal comma? set measurement.decimal = \",\""
+            else:
+                hint = "; add the word to measurement.na_values if it marks a missing value"
+            raise InputError(path, f"value {cell!r} is not a number{hint}", column=name,
+                             row=first_row + k)
+        columns[name] = values.to_numpy(dtype=float)
+    return columns
 
 
 def _dedupe(header: list[str]) -> tuple[list[str], frozenset]:
@@ -170,29 +338,6 @@ def _dedupe(header: list[str]) -> tuple[list[str], frozenset]:
         seen[h] = seen.get(h, 0) + 1
         out.append(h if seen[h] == 1 else f"{h}#{seen[h]}")
     return out, frozenset(h for h, n in seen.items() if n > 1)
-
-
-_NAN_WORDS = {"", "nan", "NaN", "NAN", "na", "NA", "null", "NULL", "-", "#N/A"}
-
-
-def _to_float(s: str):
-    s = s.strip()
-    if s in _NAN_WORDS:
-        return np.nan
-    try:
-        return float(s)
-    except ValueError:
-        return None
-
-
-def _parse_numbers(raw) -> np.ndarray | None:
-    try:  # fast path: every field is a plain number
-        return np.array(raw, dtype=float)
-    except ValueError:
-        values = [_to_float(s) for s in raw]
-        if any(v is None for v in values):
-            return None
-        return np.array(values, dtype=float)
 
 
 # --- COMTRADE (IEEE C37.111) ----------------------------------------------------------------

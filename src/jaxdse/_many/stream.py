@@ -82,7 +82,8 @@ def _next_context(fe, ctx, at):
     before = jnp.arange(fe.p_lv.shape[0]) < at
     p_sum, p_count = (0.0, 0) if ctx is None else (ctx.p_lv_sum, ctx.p_lv_count)
     return StreamContext(p_sum + jnp.sum(jnp.where(before, fe.p_lv, 0.0)), p_count + at,
-                         fe.theta_ref[at], (fe.alg.delta_rad - fe.theta_ref)[at], fe.theta_t[at])
+                         fe.theta_ref[at], (fe.alg.delta_rad - fe.theta_ref)[at], fe.theta_t[at],
+                         None if fe.alg.q_state is None else fe.alg.q_state[at])
 
 
 @eqx.filter_jit

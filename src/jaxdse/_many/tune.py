@@ -45,7 +45,7 @@ from .._core.estimate import estimate
 from .._core.plant import Plant
 from .._core.recording import Recording
 from .._core.settings import Settings
-from .batch import stack_recordings
+from .batch import batch_size, stack, stack_recordings
 
 TUNABLE = ("lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1", "gamma2", "k_obs")
 """Observer parameters that :func:`tune` adjusts by default (paper Table I)."""
@@ -93,11 +93,13 @@ def tuning_loss(config: ObserverConfig, recordings: Recording, plant: Plant,
                 weights: LossWeights = LossWeights()) -> jax.Array:
     """Differentiable loss of ``config`` over a stacked batch of recordings (leading axis).
 
-    ``a2_true`` [B] (or None) enables the parameter part; ``plant`` is shared.
+    ``a2_true`` [B] (or None) enables the parameter part. ``plant`` is one plant shared by
+    every recording, or a stacked batch (:func:`jaxdse.stack`) with one plant per recording.
     """
     settings = dataclasses.replace(settings, keep="trajectories")
+    plant_axis = None if batch_size(plant) is None else 0
 
-    def one(rec, a2):
+    def one(rec, plant, a2):
         est = estimate(rec, plant, config, settings)
         n = rec.t_s.shape[0] if rec.n_samples is None else rec.n_samples
         valid = jnp.arange(rec.t_s.shape[0]) < n
@@ -121,7 +123,8 @@ def tuning_loss(config: ObserverConfig, recordings: Recording, plant: Plant,
             loss += weights.parameter * (jnp.sum(jnp.where(valid, rel2 + outside, 0.0)) / n + last_exit)
         return loss
 
-    return jnp.mean(jax.vmap(one)(recordings, a2_true))
+    return jnp.mean(jax.vmap(one, in_axes=(0, plant_axis, 0 if a2_true is not None else None))(
+        recordings, plant, a2_true))
 
 
 def resolve_autodiff(autodiff: str, n_recordings: int) -> str:
@@ -131,6 +134,16 @@ def resolve_autodiff(autodiff: str, n_recordings: int) -> str:
     if autodiff != "auto":
         return autodiff
     return "fwd" if n_recordings <= FORWARD_MODE_MAX_RECORDINGS else "bwd"
+
+
+def settings_for(settings: Settings, mode: str) -> Settings:
+    """``settings`` able to take gradients in ``mode``: adaptive steps in forward mode need
+    diffrax's forward-mode adjoint (the default one, recursive checkpointing, is reverse only)."""
+    if mode != "fwd":
+        return settings
+    return dataclasses.replace(settings, **{
+        k: dataclasses.replace(getattr(settings, k), forward_mode=True)
+        for k in ("observer_integrator", "playback_integrator") if getattr(settings, k).adaptive})
 
 
 def forward_mode(fn: Callable[[jax.Array], jax.Array]) -> Callable[[jax.Array], jax.Array]:
@@ -158,6 +171,11 @@ class TuneResult(eqx.Module):
     """Tuned configuration and the losses before and after, on training and held-out data."""
 
     config: ObserverConfig
+    """The best configuration on the training recordings."""
+    recommended: ObserverConfig
+    """``config`` if it improved the held-out loss (the training loss without held-out
+    recordings), else the start: a tuning that does not generalise is not recommended."""
+    improved: bool
     loss_start: float
     loss_tuned: float
     heldout_loss_start: float | None
@@ -167,9 +185,10 @@ class TuneResult(eqx.Module):
     """Training loss after each optimiser step."""
 
 
-def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = ObserverConfig(),
-         a2_true: Sequence[float] | None = None, *, heldout: Sequence[Recording] = (),
-         heldout_a2_true: Sequence[float] | None = None, names: Sequence[str] = TUNABLE,
+def tune(recordings: Sequence[Recording], plant: Plant | Sequence[Plant],
+         start: ObserverConfig = ObserverConfig(), a2_true: Sequence[float] | None = None, *,
+         heldout: Sequence[Recording] = (), heldout_a2_true: Sequence[float] | None = None,
+         heldout_plant: Plant | Sequence[Plant] | None = None, names: Sequence[str] = TUNABLE,
          weights: LossWeights = LossWeights(), settings: Settings = TUNE_SETTINGS,
          max_steps: int = 40, max_factor: float = 10.0, rtol: float = 1e-4, atol: float = 1e-6,
          autodiff: str = "auto", progress: Callable[[int, float], None] | None = None) -> TuneResult:
@@ -177,16 +196,21 @@ def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = 
 
     Arguments:
         recordings: training recordings (any lengths; padded and masked).
+        plant: one plant for every recording, or one per recording (vmapped).
         a2_true: known a2 per training recording (synthetic data), or None.
-        heldout, heldout_a2_true: cross-validation recordings, scored before and after.
+        heldout, heldout_a2_true, heldout_plant: cross-validation recordings, scored before
+            and after (their plant(s): ``plant`` when it is a single one).
         autodiff: "fwd" (forward mode), "bwd" (reverse mode through the checkpointed time
             loop) or "auto" (forward mode up to ``FORWARD_MODE_MAX_RECORDINGS`` recordings);
             see the module docstring. Both give the same gradient to round-off.
         progress: called with (step, training loss) after each optimiser step.
     """
     autodiff = resolve_autodiff(autodiff, len(recordings))
+    settings = settings_for(settings, autodiff)
     names = tuple(names)
     train = stack_recordings(list(recordings))
+    if isinstance(plant, list | tuple):
+        plant = stack(list(plant))
     a2 = None if a2_true is None else jnp.asarray(a2_true, dtype=float)
 
     data = (train, a2)  # passed as arguments: closed over, XLA would constant-fold the front end
@@ -216,14 +240,30 @@ def tune(recordings: Sequence[Recording], plant: Plant, start: ObserverConfig = 
     loss = eqx.filter_jit(tuning_loss)
     held = stack_recordings(list(heldout)) if heldout else None
     held_a2 = None if heldout_a2_true is None else jnp.asarray(heldout_a2_true, dtype=float)
+    if heldout_plant is None:
+        if batch_size(plant) is not None and held is not None:
+            raise ValueError("tune: with one plant per training recording, give heldout_plant")
+        heldout_plant = plant
+    elif isinstance(heldout_plant, list | tuple):
+        heldout_plant = stack(list(heldout_plant))
 
-    def score(cfg, recs, truth):
-        return None if recs is None else float(loss(cfg, recs, plant, settings, truth, weights))
+    def score(cfg, recs, truth, plants):
+        return None if recs is None else float(loss(cfg, recs, plants, settings, truth, weights))
 
-    return TuneResult(config=best, loss_start=score(start, train, a2), loss_tuned=score(best, train, a2),
-                      heldout_loss_start=score(start, held, held_a2),
-                      heldout_loss_tuned=score(best, held, held_a2), steps=taken,
-                      history=tuple(history))
+    result = dict(loss_start=score(start, train, a2, plant), loss_tuned=score(best, train, a2, plant),
+                  heldout_loss_start=score(start, held, held_a2, heldout_plant),
+                  heldout_loss_tuned=score(best, held, held_a2, heldout_plant))
+    bad = [k for k, v in result.items() if v is not None and not np.isfinite(v)]
+    if bad or not np.all(np.isfinite(history)):
+        raise FloatingPointError(
+            f"the tuning loss is not finite ({', '.join(bad) or 'during the search'}): the "
+            "integration failed on these recordings; try integrator = \"adaptive\" or smaller gains")
+    if held is not None:
+        improved = result["heldout_loss_tuned"] < result["heldout_loss_start"]
+    else:
+        improved = result["loss_tuned"] < result["loss_start"]
+    return TuneResult(config=best, steps=taken, history=tuple(history), improved=bool(improved),
+                      recommended=best if improved else start, **result)
 
 
 def config_values(config: ObserverConfig, names: Sequence[str] = TUNABLE) -> dict[str, float]:

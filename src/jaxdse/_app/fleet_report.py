@@ -1,0 +1,352 @@
+"""The fleet report: report.html (sortable table, overview figure, units to look at first),
+report.md, and units/<name>.html per unit (playback figure, numbers, verdict in words).
+
+Static HTML with PNG figures beside the pages (matplotlib); the only script is a few lines
+that sort the table by a clicked column.
+"""
+
+from __future__ import annotations
+
+import html
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .._core.verdict import NOTES, VERDICTS
+
+COLOURS = {"identified": "#1a9850", "weakly identified": "#fdae61", "not identified": "#d73027",
+           "failed": "#7f7f7f"}
+"""Verdict -> colour (figures and table)."""
+EVENT_WINDOW_S = 10.0
+"""Length of the event window after the largest step of the measured P_t [s]."""
+
+CSS = """
+body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1150px;color:#222;padding:0 1em}
+table{border-collapse:collapse;font-size:14px;margin:.5em 0}
+th,td{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#f0f0f0;cursor:pointer} td:first-child,th:first-child{text-align:left}
+.v{color:#fff;padding:1px 6px;border-radius:3px;white-space:nowrap}
+.fail{color:#b00;font-weight:bold} .pass{color:#070}
+img{max-width:100%} .small{font-size:12px;color:#555}
+"""
+
+SORT_JS = """
+document.querySelectorAll('table.sortable th').forEach(function (th, col) {
+  th.title = 'click to sort';
+  th.addEventListener('click', function () {
+    var body = th.closest('table').tBodies[0], rows = Array.from(body.rows);
+    var up = th.dataset.dir !== 'up'; th.dataset.dir = up ? 'up' : 'down';
+    function key(r) { var c = r.cells[col], s = c.dataset.sort || c.textContent.trim();
+      var x = parseFloat(s); return isNaN(x) ? s.toLowerCase() : x; }
+    rows.sort(function (a, b) { var x = key(a), y = key(b);
+      if (typeof x !== typeof y) { return typeof x === 'number' ? -1 : 1; }
+      return (x < y ? -1 : x > y ? 1 : 0) * (up ? 1 : -1); });
+    rows.forEach(function (r) { body.appendChild(r); });
+  });
+});
+"""
+
+
+def window_errors(traces: dict) -> dict:
+    """Playback errors (simulated - measured) of x2, I_t, P_t, Q_t over the pre-event, event
+    and post-event windows: mean, mean absolute and maximum absolute. The event is the largest
+    step of the measured P_t after the first second; its window lasts ``EVENT_WINDOW_S``."""
+    t = traces["time_s"]
+    p = traces["P_t"][0]
+    step = np.abs(np.diff(p))
+    step[t[1:] < t[0] + 1.0] = 0.0
+    step[~np.isfinite(step)] = 0.0
+    t_event = float(t[1 + int(np.argmax(step))])
+    windows = {"pre-event": t < t_event, "event": (t >= t_event) & (t < t_event + EVENT_WINDOW_S),
+               "post-event": t >= t_event + EVENT_WINDOW_S}
+    out = {"event_time_s": t_event}
+    for name, sel in windows.items():
+        out[name] = {}
+        for k in ("x2", "I_t", "P_t", "Q_t"):
+            meas, sim = traces[k]
+            e = (sim - meas)[sel]
+            e = e[np.isfinite(e)]
+            out[name][k] = ({"mean": float(np.mean(e)), "mean_abs": float(np.mean(np.abs(e))),
+                             "max_abs": float(np.max(np.abs(e)))} if e.size else None)
+    return out
+
+
+def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -> None:
+    """Write report.html, report.md, overview.png and units/<name>.html (+ .png)."""
+    out_dir = Path(out_dir)
+    (out_dir / "units").mkdir(parents=True, exist_ok=True)
+    units = doc["units"]
+    if figures:
+        plot_overview(units, out_dir / "overview.png")
+    for e in units:
+        if figures:
+            plot_playback(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
+        (out_dir / "units" / f"{e['name']}.html").write_text(unit_page(e, doc, figures))
+    (out_dir / "report.html").write_text(fleet_page(doc, figures))
+    (out_dir / "report.md").write_text(fleet_markdown(doc))
+
+
+# --- figures ----------------------------------------------------------------------------------
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_overview(units: list[dict], path: Path) -> None:
+    """H with its 95 % interval per unit against the .dyr reference, coloured by verdict."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(max(7.0, 0.42 * len(units) + 2), 4.6))
+    x = np.arange(len(units))
+    for k, e in enumerate(units):
+        colour = COLOURS[e["verdict"]]
+        h, (lo, hi) = e["H_s"], e["H_ci95"]
+        if h is not None and math.isfinite(h):
+            top = hi if hi is not None and math.isfinite(hi) else 3 * max(h, e["H_reference_s"])
+            bottom = lo if lo is not None and math.isfinite(lo) else h
+            ax.plot([k, k], [bottom, top], color=colour, lw=2.5, alpha=0.8)
+            ax.plot(k, h, "o", color=colour, ms=6, mec="k", mew=0.5)
+        ax.plot([k - 0.3, k + 0.3], [e["H_reference_s"]] * 2, color="k", lw=1.5)
+    refs = [e["H_reference_s"] for e in units]
+    ax.set_ylim(0, 2.2 * max(refs))
+    ax.set_xticks(x, [e["name"] for e in units], rotation=60, ha="right", fontsize=8)
+    ax.set_ylabel("inertia H [s, plant base]")
+    ax.grid(axis="y", alpha=0.3)
+    handles = [plt.Line2D([], [], color="k", lw=1.5, label="H of the PSS/E .dyr (reference)")]
+    handles += [plt.Line2D([], [], color=COLOURS[v], marker="o", lw=2.5, mec="k", mew=0.5,
+                           label=f"estimate with 95 % interval: {v}") for v in VERDICTS
+                if any(e["verdict"] == v for e in units)]
+    ax.legend(handles=handles, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), ncol=2,
+              frameon=False, title="Estimated inertia per unit against the model (off-scale "
+              "intervals are clipped)", title_fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
+def plot_playback(e: dict, tr: dict, path: Path) -> None:
+    """Measured against played-back x2, I_t, P_t and Q_t, the event window shaded."""
+    plt = _plt()
+    t = tr["time_s"]
+    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(9, 8))
+    labels = {"x2": "speed deviation x2 [rad/s]", "I_t": "I_t [pu]", "P_t": "P_t [pu]", "Q_t": "Q_t [pu]"}
+    t_event = e["window_errors"]["event_time_s"]
+    for ax, k in zip(axes, labels):
+        meas, sim = tr[k]
+        ax.plot(t, meas, lw=0.8, color="k", label="measured")
+        ax.plot(t, sim, lw=0.9, color="tab:red", alpha=0.85, label="simulated (playback, identified H, D)")
+        ax.axvspan(t_event, t_event + EVENT_WINDOW_S, color="tab:blue", alpha=0.08)
+        fin = meas[np.isfinite(meas)]
+        if fin.size:
+            lo, hi = float(fin.min()), float(fin.max())
+            pad = 0.5 * max(hi - lo, 1e-6 * max(abs(hi), 1.0))
+            sim_f = sim[np.isfinite(sim)]
+            if sim_f.size and (sim_f.min() < lo - 4 * pad or sim_f.max() > hi + 4 * pad):
+                ax.set_ylim(lo - 4 * pad, hi + 4 * pad)
+        ax.set_ylabel(labels[k], fontsize=9)
+        ax.grid(alpha=0.3)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time [s] (shaded: event window)")
+    fig.suptitle(f"{e['name']}: measured vs simulated — {e['verdict']}", fontsize=11)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+# --- pages ------------------------------------------------------------------------------------
+
+def _f(x, spec=".2f") -> str:
+    return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
+
+
+def _ci(e) -> str:
+    lo, hi = e["H_ci95"]
+    return f"{_f(lo)} – {_f(hi) if hi is not None else '∞'}"
+
+
+def _badge(verdict: str) -> str:
+    return f'<span class="v" style="background:{COLOURS[verdict]}">{html.escape(verdict)}</span>'
+
+
+def _decisive(e) -> list[str]:
+    return [v for k, v in e["reasons"].items() if k not in NOTES]
+
+
+def _page(title: str, body: str, script: bool = False) -> str:
+    js = f"<script>{SORT_JS}</script>" if script else ""
+    return (f"<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
+            f"<title>{html.escape(title)}</title><style>{CSS}</style></head>\n<body>\n{body}\n{js}"
+            "</body></html>\n")
+
+
+def _attention(units: list[dict]) -> list[dict]:
+    """Units to look at first: worst verdict, then failed criteria, then largest |H error|."""
+    todo = [e for e in units if e["verdict"] != "identified" or not e["passes"]]
+    return sorted(todo, key=lambda e: (-VERDICTS.index(e["verdict"]), e["passes"],
+                                       -abs(e["H_error_percent"] or 0.0)))
+
+
+def _pf(ok: bool) -> str:
+    return "pass" if ok else "fail"
+
+
+def _why_short(e: dict) -> str:
+    failed = [c["what"] for c in e["criteria"].values() if not c["pass"]]
+    return (_decisive(e) or ["fails the criteria: " + ", ".join(failed)])[0]
+
+
+def fleet_page(doc: dict, figures: bool) -> str:
+    units, s = doc["units"], doc["summary"]
+    rows = []
+    for e in units:
+        err = e["H_error_percent"]
+        rows.append(
+            f"<tr><td><a href=\"units/{html.escape(e['name'])}.html\">{html.escape(e['name'])}</a></td>"
+            f"<td>{e['bus']}</td><td>{e['s_mva']:.0f}</td>"
+            f"<td>{html.escape('/'.join(m['model'] for m in e['units'][:1]))} ×{len(e['units'])}</td>"
+            f"<td>{html.escape(', '.join(e['governor_models']))}</td>"
+            f"<td>{_f(e['H_s'])}</td><td data-sort=\"{_f(e['interval']['relative_ci_percent'], '.3f')}\">"
+            f"{_ci(e)}</td><td>{_f(e['H_reference_s'])}</td>"
+            f"<td data-sort=\"{_f(abs(err) if err is not None else None, '.3f')}\">"
+            f"{_f(err, '+.1f')}</td>"
+            f"<td data-sort=\"{VERDICTS.index(e['verdict'])}\">{_badge(e['verdict'])}</td>"
+            f"<td class=\"{_pf(e['passes'])}\">{_pf(e['passes'])}</td></tr>")
+    todo = _attention(units)
+    attention = "".join(
+        f"<li><a href=\"units/{html.escape(e['name'])}.html\">{html.escape(e['name'])}</a>: "
+        f"{_badge(e['verdict'])} {html.escape(_why_short(e))}</li>" for e in todo[:10]) \
+        or "<li>none: every unit is identified and passes the criteria</li>"
+    skipped = "".join(f"<li>{html.escape(str(k['name']))} (bus {k['bus']}): {html.escape(k['reason'])}</li>"
+                      for k in doc["skipped"])
+    crit = doc["criteria"]
+    median = s["median_abs_H_error_percent"]
+    body = f"""
+<h1>Fleet model validation: inertia from PMU recordings</h1>
+<p class="small">{html.escape(doc['source'])} · jaxdse {html.escape(doc['jaxdse_version'])} ·
+case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revision']}) and
+{html.escape(Path(doc['case']['dyr']).name)} · {doc['wall_time_s']:.0f} s</p>
+<p><b>{s['units']}</b> units estimated ({s['skipped']} skipped). Verdicts:
+{', '.join(f'{_badge(v)} {n}' for v, n in s['verdicts'].items())}. Median |H − H<sub>.dyr</sub>|:
+<b>{_f(median, '.1f')} %</b>; {s['within_10_percent']} of {s['units']} within 10 %.
+Units identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}
+{html.escape(', '.join(s['identified_outside_10_percent']))}.</p>
+<h2>Look at these first</h2>
+<ul>{attention}</ul>
+<h2>Estimate against the model</h2>
+{'<img src="overview.png" alt="estimated H with intervals against the .dyr H">' * figures}
+<p class="small">Dots: the batch estimate of H (s, on the plant's summed MBASE); bars: its 95 %
+interval; black dashes: the MBASE-weighted H of the plant's machine records in the .dyr.
+Colour = verdict: green identified (interval within ±10 %, playback follows the data), orange
+weakly identified, red not identified (the data cannot tell H apart), grey failed.</p>
+<h2>All units</h2>
+<p class="small">Click a column heading to sort. Criteria ([criteria] of the fleet file): 95 %
+interval of H within ±{crit['max_interval_percent']:g} %, playback sMAPE of I_t ≤
+{crit['max_smape_i_t']:g} %, of P_t ≤ {crit['max_smape_p_t']:g} %, of Q_t ≤ {crit['max_smape_q_t']:g} %.</p>
+<table class="sortable"><thead><tr><th>unit</th><th>bus</th><th>MVA</th><th>machine model</th>
+<th>governor(s)</th><th>H [s]</th><th>95 % interval [s]</th><th>.dyr H [s]</th><th>difference [%]</th>
+<th>verdict</th><th>criteria</th></tr></thead><tbody>
+{''.join(rows)}
+</tbody></table>
+{f'<h2>Skipped</h2><ul>{skipped}</ul>' if skipped else ''}
+<p class="small">Also: <a href="fleet.json">fleet.json</a> (every number), <a href="fleet.csv">fleet.csv</a>,
+<a href="report.md">report.md</a>.</p>
+"""
+    return _page("Fleet model validation", body, script=True)
+
+
+def unit_page(e: dict, doc: dict, figures: bool) -> str:
+    name = html.escape(e["name"])
+    decisive, notes = _decisive(e), [v for k, v in e["reasons"].items() if k in NOTES]
+    why = {"identified": "The recording determines H to within ±10 % at 95 % confidence and the "
+                         "playback with the identified H and D follows the measurement.",
+           "weakly identified": "An estimate is given, but it is not tight enough to file as identified:",
+           "not identified": "The recording does not tell H apart; the number is not usable:",
+           "failed": "The estimate failed:"}[e["verdict"]]
+    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in decisive)
+    note_list = "".join(f"<li>{html.escape(r)}</li>" for r in notes)
+    it = e["interval"]
+    numbers = [("H [s]", _f(e["H_s"], ".3f")), ("95 % interval of H [s]", _ci(e)),
+               ("H of the .dyr (MBASE-weighted) [s]", _f(e["H_reference_s"], ".3f")),
+               ("difference [%]", _f(e["H_error_percent"], "+.1f")),
+               ("D [pu torque / (rad/s)]", _f(e["D"], ".4g")),
+               ("95 % interval of D", " – ".join(_f(x, ".4g") for x in (e["D_ci95"] or [None, None]))),
+               ("interval half width [%]", _f(it["relative_ci_percent"], ".1f")),
+               ("  of which measurement noise [%]", _f(it["noise_percent"], ".1f")),
+               ("  of which model error (filter spread) [%]", _f(it["filter_spread_percent"], ".1f")),
+               ("condition number", _f(it["condition"], ".3g")),
+               ("online DREM/I&I H [s]", _f(e["online"]["H_s"], ".3f")),
+               ("torque offset the data ask for [pu]", _f(e["identification"].get("t_m_offset_pu"), ".4f")),
+               ("governor gain error [-]", _f(e["identification"].get("governor_gain_error"), ".3f"))]
+    num_rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>" for k, v in numbers)
+    crit_rows = "".join(
+        f"<tr><td>{html.escape(c['what'])}</td><td>{_f(c['value'])}</td><td>≤ {c['limit']:g}</td>"
+        f"<td class=\"{_pf(c['pass'])}\">{_pf(c['pass'])}</td></tr>"
+        for c in e["criteria"].values())
+    we = e["window_errors"]
+    win_rows = "".join(
+        f"<tr><td>{w}</td><td>{k}</td>" + "".join(
+            f"<td>{_f((we[w][k] or {}).get(s), '.3g')}</td>" for s in ("mean", "mean_abs", "max_abs"))
+        + "</tr>" for w in ("pre-event", "event", "post-event") for k in ("x2", "I_t", "P_t", "Q_t"))
+    unit_rows = "".join(
+        f"<tr><td>{html.escape(m['id'])}</td><td>{m['model']}</td><td>{m['mbase_mva']:g}</td>"
+        f"<td>{m['h_s']:g}</td><td>{html.escape(m['governor'] or 'none (constant torque)')}</td></tr>"
+        for m in e["units"])
+    q = e["data_quality"]
+    quality = (f"{q.get('rows_read')} rows read at {_f(q.get('frame_rate_hz'), '.3g')} frames/s; "
+               f"{len(q.get('bridged_gaps', []))} gap(s) bridged; {q.get('segments', 1)} segment(s), the "
+               f"longest used; NaN samples: {sum((q.get('nan_samples') or {}).values())}")
+    others = (f"<p><b>Other units on this bus</b> (no machine record, e.g. renewables; their current is "
+              f"in the measured current and biases H): {html.escape(', '.join(e['other_units_on_bus']))}</p>"
+              if e["other_units_on_bus"] else "")
+    inputs = "".join(f"<li>{html.escape(i['file'])}: sha256 {i['sha256']}</li>" for i in doc["inputs"])
+    cols = "".join(f"<li>{k}: <code>{html.escape(str(v))}</code></li>" for k, v in e["columns"].items())
+    body = f"""
+<p><a href="../report.html">← fleet</a></p>
+<h1>{name} {_badge(e['verdict'])}</h1>
+<p>Bus {e['bus']} ({e['bus_kv']:g} kV), {e['s_mva']:.0f} MVA, {len(e['units'])} unit(s);
+governor model(s): {html.escape(', '.join(e['governor_models']))}; PMU at the
+{'machine terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
+<h2>Verdict: {html.escape(e['verdict'])}</h2><p>{why}</p>{f'<ul>{reasons}</ul>' if reasons else ''}
+{f'<p>Notes (do not change the verdict):</p><ul>{note_list}</ul>' if note_list else ''}
+<h2>Playback: measured against simulated</h2>
+{f'<img src="{name}.png" alt="measured and simulated x2, I_t, P_t, Q_t">' * figures}
+<p class="small">The simulated traces replay the recording's terminal voltage into the
+third-order machine with the identified H and D and the plant's governor model(s).</p>
+<h2>Numbers</h2><table>{num_rows}</table>
+<h2>Acceptance criteria</h2>
+<table><tr><th>quantity</th><th>value</th><th>limit</th><th>result</th></tr>{crit_rows}</table>
+<h2>Playback errors by window</h2>
+<p class="small">Simulated − measured; event at {we['event_time_s']:.2f} s (the largest step of
+P_t), event window {EVENT_WINDOW_S:g} s.</p>
+<table><tr><th>window</th><th>signal</th><th>mean</th><th>mean |e|</th><th>max |e|</th></tr>
+{win_rows}</table>
+<h2>Plant (from the PSS/E case)</h2>
+<table><tr><th>unit ID</th><th>model</th><th>MBASE [MVA]</th><th>H [s]</th><th>governor</th></tr>
+{unit_rows}</table>
+{others}
+<h2>Data</h2><p>{html.escape(quality)}</p><ul>{cols}</ul>
+<h2>Provenance</h2><p class="small">jaxdse {html.escape(doc['jaxdse_version'])}; fleet file
+{html.escape(doc['config']['file'])} (sha256 {doc['config']['sha256']})</p><ul class="small">{inputs}</ul>
+"""
+    return _page(f"{e['name']}: {e['verdict']}", body)
+
+
+def fleet_markdown(doc: dict) -> str:
+    s = doc["summary"]
+    lines = [f"# Fleet: {doc['source']}", "",
+             f"{s['units']} units, {s['skipped']} skipped; median |H error| "
+             f"{_f(s['median_abs_H_error_percent'], '.1f')} %; verdicts {s['verdicts']}.", "",
+             "| unit | MVA | governor(s) | H [s] | 95 % interval [s] | .dyr H [s] | error [%] | verdict "
+             "| criteria |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for e in doc["units"]:
+        lines.append(f"| {e['name']} | {e['s_mva']:.0f} | {'/'.join(e['governor_models'])} | "
+                     f"{_f(e['H_s'])} | "
+                     f"{_ci(e)} | {_f(e['H_reference_s'])} | {_f(e['H_error_percent'], '+.1f')} | "
+                     f"{e['verdict']} | {_pf(e['passes'])} |")
+    return "\n".join(lines) + "\n"

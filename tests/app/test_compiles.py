@@ -1,0 +1,88 @@
+"""Compile once: a 10-generator config compiles the estimator and the identification a few times.
+
+`jaxdse run` pads every recording to one of a few length buckets and batches the generators
+of a bucket into one call, so 10 generators on recordings of two lengths compile the online
+estimator (``estimate``, vmapped) and the identification (the vmapped ``assess``) at most 3
+times each. Counted from the ``JAX_LOG_COMPILES`` log of a `jaxdse run` subprocess: JAX logs
+"Compiling <name>" for every lowering, before it looks in the persistent compilation cache, so
+the count does not depend on the cache.
+"""
+
+import json
+import os
+import re
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import jaxdse as jd
+
+pytestmark = pytest.mark.slow
+
+COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
+CONFIG = """plant_defaults = "paper"
+
+[measurement]
+v_base_kv = 400.0
+min_segment_s = 20.0
+
+[measurement.columns]
+time = "t"
+frequency = "f"
+v_mag = "VM"
+v_ang = "VA"
+i_mag = "IM"
+i_ang = "IA"
+
+[output]
+figures = false
+trajectories = false
+"""
+GENERATOR = """
+[[generator]]
+name = "g{k}"
+a2_reference = {a2}
+[generator.measurement]
+file = "g{k}.csv"
+"""
+MAX_COMPILES = 3
+COMPILING = re.compile(r"Compiling jit\((\w+)\)")
+ESTIMATE = ("one", "estimate")
+"""Names of the jitted online estimator: jaxdse._many.batch jits ``one`` (vmapped estimate)."""
+
+
+@pytest.fixture(scope="module")
+def ten_generators(pmu25, tmp_path_factory):
+    """10 generators: 5 recordings of 60 s and 5 of 50 s (two length buckets), each with its own
+    current scale and a2 reference."""
+    root = tmp_path_factory.mktemp("ten")
+    spec = jd.MeasurementSpec(file=(), columns=COLS, v_base_kv=400.0)
+    cols = jd.phasor_columns(pmu25.recording, spec)
+    text = CONFIG
+    for k in range(10):
+        n = 1501 if k < 5 else 1251
+        part = {name: x[:n] for name, x in cols.items()}
+        part["IM"] = part["IM"] * (0.9 + 0.02 * k)
+        jd.write_csv(root / f"g{k}.csv", part)
+        text += GENERATOR.format(k=k, a2=25.4 + 0.1 * k)
+    (root / "ten.toml").write_text(text)
+    return root
+
+
+def test_ten_generators_compile_estimate_and_assess_at_most_three_times(ten_generators):
+    env = dict(os.environ, JAX_LOG_COMPILES="1")
+    out = subprocess.run([sys.executable, "-m", "jaxdse._app.cli", "run", str(ten_generators / "ten.toml"),
+                          "--out", str(ten_generators / "out")], env=env, capture_output=True, text=True,
+                         timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    summary = json.loads((ten_generators / "out" / "summary.json").read_text())
+    assert len(summary["recordings"]) == 10
+    assert all(np.isfinite(e["H_s"]) for e in summary["recordings"])
+    names = COMPILING.findall(out.stderr)
+    estimate = [n for n in names if n in ESTIMATE]
+    assess = [n for n in names if "assess" in n]
+    print(f"compiles: estimate {len(estimate)}, assess {len(assess)}, all {len(names)}")
+    assert 1 <= len(estimate) <= MAX_COMPILES, names
+    assert 1 <= len(assess) <= MAX_COMPILES, names
