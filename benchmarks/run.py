@@ -279,6 +279,8 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke test, not the table)")
     ap.add_argument("--memory-only", action="store_true",
                     help="re-measure only the two memory cases into the existing results.json")
+    ap.add_argument("--keep-memory", action="store_true",
+                    help="keep the memory figures of the existing results.json (skips ~5 min)")
     ap.add_argument("--memory", help=argparse.SUPPRESS)
     ap.add_argument("--folder", help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -385,7 +387,10 @@ def main() -> None:
     ident = {}
     for name, ids in (("default", jd.IdentifySettings()),
                       ("sandwich", jd.IdentifySettings(bootstrap_draws=0, spread_scales=()))):
-        one = jax.jit(jax.vmap(lambda r, ids=ids: jd.identify(r, plant, cfg, jd.Settings(), ids).a2))
+        # lax.map, not vmap, over recordings (as `jaxdse run` does): XLA's CPU runtime deadlocked
+        # on the vmapped identification; each recording's bootstrap is vmapped inside.
+        one = jax.jit(lambda rs, ids=ids: jax.lax.map(
+            lambda r: jd.identify(r, plant, cfg, jd.Settings(), ids).a2, rs))
         chunks = [jax.device_put(jax.tree_util.tree_map(lambda x, k=k: x[k:k + IDENTIFY_CHUNK], recs), shard)
                   for k in range(0, b, IDENTIFY_CHUNK)]  # sharded over the devices, as the UKFs
 
@@ -408,7 +413,10 @@ def main() -> None:
     res.update(gradient_cost(sims, plant, cfg, (1, 4) if args.quick else (1, 4, 16)))
 
     # memory
-    if not args.quick:
+    if args.keep_memory:
+        old = json.loads((HERE / "results.json").read_text())
+        res.update({k: v for k, v in old.items() if k.startswith(("peak_rss", "memory_case"))})
+    elif not args.quick:
         measure_memory(res)
 
     (HERE / ("results_quick.json" if args.quick else "results.json")).write_text(json.dumps(res, indent=2))

@@ -7,7 +7,6 @@ The public API is flat; the code lives in private subpackages by pipeline layer:
 (the command-line tool).
 """
 
-from . import _xla_flags  # noqa: F401  # isort: skip  (before anything starts JAX's CPU backend)
 from ._version import __version__ as __version__  # isort: skip  (first: the app reads it)
 from ._app.demo import demo_scenarios as demo_scenarios
 from ._app.fleet import fleet as fleet

@@ -151,3 +151,12 @@ def test_unstable_fixed_steps_hold_last_finite_state_and_report_failure(ambient,
 def test_smape_of_nan_is_nan_not_zero():
     assert np.isnan(float(jd.smape_percent(jnp.array([np.nan, 1.0]), jnp.array([1.0, 1.0]))))
     assert float(jd.smape_percent(jnp.zeros(3), jnp.zeros(3))) == 0.0
+
+
+def test_float32_use_fails_fast_with_a_clear_message(short, plant):
+    jax.config.update("jax_enable_x64", False)
+    try:
+        with pytest.raises(RuntimeError, match="jax_enable_x64"):
+            jd.estimate(short, plant, jd.ObserverConfig())
+    finally:
+        jax.config.update("jax_enable_x64", True)

@@ -57,8 +57,14 @@ def _group_key(u: Unit):
             jax.tree_util.tree_structure(u.gen.plant))
 
 
-_assess = eqx.filter_jit(jax.vmap(assess, in_axes=(0, 0, 0, None, None, None, None)))
-"""Identification, replay with the identified parameters and verdict, vmapped over a group."""
+@eqx.filter_jit
+def _assess(recs, plants, online, config, settings, identify_settings, verdict_settings):
+    """Identification, replay with the identified parameters and verdict of every member of a
+    group, in one compiled call. A loop (``lax.map``), not ``vmap``: XLA's CPU runtime deadlocked
+    (every thread idle) on the vmapped identification of some groups; each unit's bootstrap
+    is still vmapped inside."""
+    return jax.lax.map(lambda a: assess(*a, config, settings, identify_settings, verdict_settings),
+                       (recs, plants, online))
 
 
 def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:

@@ -66,6 +66,10 @@ class FrontEnd(NamedTuple):
 def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(),
               context: StreamContext | None = None) -> FrontEnd:
     """Mapping to the terminal, algebraic observer and measured speed, for every sample."""
+    if not jax.config.jax_enable_x64:  # every entry point (estimate, identify, replay) passes here
+        raise RuntimeError("jaxdse computes in float64 (a 600 s recording's time axis and the "
+                           "angle differences lose digits in float32): call "
+                           "jax.config.update('jax_enable_x64', True) first")
     m = plant.machine
     ts = recording.t_s
     dt = ts[1] - ts[0]
