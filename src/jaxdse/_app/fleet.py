@@ -18,7 +18,6 @@ import json
 import re
 import sys
 import time
-import tomllib
 from collections import Counter
 from pathlib import Path
 
@@ -32,7 +31,16 @@ from .._core.machine import Machine, QAxisCircuits
 from .._core.mapping import AuxiliarySystem, Transformer
 from .._core.plant import Plant
 from .._core.verdict import NOTES
-from .._io.config import GeneratorRun, _identify, _measurement, _module, _no_unknown, _settings, _table
+from .._io.config import (
+    GeneratorRun,
+    _identify,
+    _measurement,
+    _module,
+    _no_unknown,
+    _settings,
+    _table,
+    read_toml,
+)
 from .._io.errors import InputError
 from .._io.measurement import condition
 from .._io.psse import (
@@ -116,12 +124,7 @@ class Fleet:
 def load_fleet(path) -> Fleet:
     """Read and validate a fleet file, the PSS/E case it names and the recordings' headers."""
     path = Path(path)
-    if not path.exists():
-        raise InputError(path, "file does not exist")
-    try:
-        data = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as err:
-        raise InputError(path, f"malformed TOML: {err}") from None
+    data = read_toml(path)
     _no_unknown(path, data, TOP, "")
     case = _table(path, data, "case", "case")
     _no_unknown(path, case, {"raw", "dyr"}, "case.")

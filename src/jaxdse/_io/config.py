@@ -102,17 +102,22 @@ class RunConfig:
     """Validated [tune] table."""
 
 
-def load_config(path) -> RunConfig:
-    """Read and validate a TOML configuration file (relative paths are relative to it)."""
-    path = Path(path)
+def read_toml(path: Path) -> dict:
+    """The TOML document at ``path``, or a one-line :class:`InputError` naming the file."""
     if not path.exists():
         raise InputError(path, "file does not exist")
     try:
-        data = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as err:
         raise InputError(path, f"malformed TOML: {err}") from None
     except UnicodeDecodeError:
         raise InputError(path, "not a text file") from None
+
+
+def load_config(path) -> RunConfig:
+    """Read and validate a TOML configuration file (relative paths are relative to it)."""
+    path = Path(path)
+    data = read_toml(path)
     return parse_config(data, path)
 
 
