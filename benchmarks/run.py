@@ -381,27 +381,34 @@ def main() -> None:
         print(name, ukf_res[f"dynamax_{name}"], fp_entry, flush=True)
     res["ukf"] = ukf_res
 
-    # batch identification (jd.identify) on the same recordings, at the joint UKF's batch
+    # batch identification (jd.identify) on the same recordings, at the joint UKF's batch. Its
+    # output is a2 AND the 95 % interval of H, so that XLA cannot drop the interval's work
+    # (the bootstrap, the filter spread) as dead code.
     b = 64 if args.quick else 1024
     recs, idx = tile(sims, b)
     ident = {}
     for name, ids in (("default", jd.IdentifySettings()),
-                      ("sandwich", jd.IdentifySettings(bootstrap_draws=0, spread_scales=()))):
-        # lax.map, not vmap, over recordings (as `jaxdse run` does): XLA's CPU runtime deadlocked
-        # on the vmapped identification; each recording's bootstrap is vmapped inside.
-        one = jax.jit(lambda rs, ids=ids: jax.lax.map(
-            lambda r: jd.identify(r, plant, cfg, jd.Settings(), ids).a2, rs))
+                      ("sandwich", jd.IdentifySettings(noise_interval="sandwich", spread_scales=())),
+                      ("point estimate", jd.IdentifySettings(noise_interval="sandwich", spread_scales=()))):
+        def out_of(r, ids=ids, name=name):
+            i = jd.identify(r, plant, cfg, jd.Settings(), ids)
+            return i.a2 if name == "point estimate" else (i.a2, i.h_ci95)
+
+        one = jax.jit(jax.vmap(out_of))  # vmapped over recordings, sharded over the devices
         chunks = [jax.device_put(jax.tree_util.tree_map(lambda x, k=k: x[k:k + IDENTIFY_CHUNK], recs), shard)
-                  for k in range(0, b, IDENTIFY_CHUNK)]  # sharded over the devices, as the UKFs
+                  for k in range(0, b, IDENTIFY_CHUNK)]
 
         def fn(one=one, chunks=chunks):
-            return np.concatenate([np.asarray(one(c)) for c in chunks])
+            return jax.tree_util.tree_map(lambda *x: np.concatenate(x), *[jax.device_get(one(c)) for c in chunks])
 
         first, best, out = timed(fn, repeat=1)
+        a2_out = out if name == "point estimate" else out[0]
         ident[name] = {"batch": b, "gen_samples_per_s": b * n_t / best, "compile_s": first - best,
                        "a2_error_percent_median_abs": float(np.median(np.abs(
-                           100 * (np.asarray(out)[: len(sims)] - a2_true) / a2_true))),
-                       "bootstrap_draws": ids.bootstrap_draws, "filter_spread": bool(ids.spread_scales)}
+                           100 * (np.asarray(a2_out)[: len(sims)] - a2_true) / a2_true))),
+                       "interval": {"default": f"bootstrap, {ids.bootstrap_draws} draws, filter spread",
+                                    "sandwich": "Newey-West sandwich, no filter spread",
+                                    "point estimate": "none (a2 only)"}[name]}
         print("identify", name, ident[name], flush=True)
     res["identify"] = ident
     res["identify_gen_samples_per_s"] = ident["default"]["gen_samples_per_s"]
@@ -452,8 +459,7 @@ def write_table(res, path):
         lines.append(f"| {k.replace('_', ' UKF ')} | {v['batch']} | {v['gen_samples_per_s']:,.0f} | "
                      f"{v.get('compile_s', 0):.1f} | {rel(v['gen_samples_per_s'])} |")
     for k, v in res.get("identify", {}).items():
-        what = f"{v['bootstrap_draws']} bootstrap draws" if v["bootstrap_draws"] else "sandwich interval"
-        what += ", filter spread" if v["filter_spread"] else ""
+        what = v["interval"]
         lines.append(f"| jaxdse identify ({k}: {what}) | {v['batch']} | {v['gen_samples_per_s']:,.0f} | "
                      f"{v['compile_s']:.1f} | {rel(v['gen_samples_per_s'])} |")
     lines += ["", "| accuracy | x2 RMSE rad/s (2nd half) | a2 error % |", "|---|---|---|"]

@@ -91,10 +91,9 @@ SETTINGS = jd.Settings(playback=False, keep="final")
 
 
 def unit(rec: jd.Recording, p: jd.Plant):
-    """The default pipeline of ``jaxdse run`` for one unit: online estimate, then assess."""
-    est = jd.estimate(rec, p, jd.ObserverConfig(), SETTINGS)
-    ident, rep, verdict = jd.assess(rec, p, est, jd.ObserverConfig(), SETTINGS)
-    return est.h_s, est.converged, ident, rep.smape.i_t, verdict
+    """The default pipeline of ``jaxdse run`` for one unit (``jd.assess``)."""
+    a = jd.assess(rec, p, jd.ObserverConfig(), SETTINGS)
+    return a.estimate.h_s, a.estimate.converged, a.identified, a.replay.smape.i_t, a.verdict
 
 
 _unit = jax.jit(unit)

@@ -51,3 +51,43 @@ def test_help_teaches():
     exe = shutil.which("jaxdse") or str(Path(sys.executable).parent / "jaxdse")
     res = subprocess.run([exe, "demo", "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and "summary.json" in res.stdout and "example" in res.stdout
+
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def one_line_error(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("jaxdse: error:")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_run_on_a_fleet_file_and_fleet_on_a_run_config_name_the_other_command(tmp_path, capsys):
+    from jaxdse._app.cli import main
+
+    fleet_file = ROOT / "experiments" / "andes_bench" / "fleet_ieee14.toml"
+    assert main(["run", str(fleet_file), "--out", str(tmp_path / "o")]) == 2
+    line = one_line_error(capsys)
+    assert "fleet_ieee14.toml" in line and "use `jaxdse fleet" in line
+    run_config = ROOT / "examples" / "csv_positive_sequence.toml"
+    assert main(["fleet", str(run_config), "--out", str(tmp_path / "o")]) == 2
+    line = one_line_error(capsys)
+    assert "csv_positive_sequence.toml" in line and "use `jaxdse run" in line
+    assert not (tmp_path / "o").exists()
+
+
+def test_fleet_strict_exits_3_unless_every_unit_is_identified(tmp_path, capsys, monkeypatch):
+    """The exit status from fleet.json's units (the estimation itself is test_fleet's)."""
+    from jaxdse._app import fleet, fleet_file
+    from jaxdse._app.cli import main
+
+    units = [{"name": "B1_G1", "verdict": "identified"}, {"name": "B2_G1", "verdict": "weakly identified"}]
+    monkeypatch.setattr(fleet_file, "load_fleet", lambda path: path)
+    monkeypatch.setattr(fleet, "run_fleet", lambda fl, out: {"units": units})
+    argv = ["fleet", "f.toml", "--out", str(tmp_path)]
+    assert main(argv) == 0
+    assert main(argv + ["--strict"]) == 3
+    assert "--strict: 1 unit(s) not identified: B2_G1" in capsys.readouterr().err
+    units[1]["verdict"] = "identified"
+    assert main(argv + ["--strict"]) == 0

@@ -2,23 +2,27 @@
 
 import dataclasses
 import json
+import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxdse as jd
 from jaxdse._app.cli import build_parser, main
-from jaxdse._app.fleet import load_fleet, run_fleet
+from jaxdse._app.fleet import run_fleet
+from jaxdse._app.fleet_file import load_fleet
 
 ROOT = Path(__file__).resolve().parents[2]
 SHARED_DATA = ROOT.parent / "shared" / "data"
 BENCH = ROOT / "experiments" / "andes_bench"
 OSL = ROOT / "experiments" / "naspi_osl_case1" / "fleet.toml"
 UNIT_KEYS = {"name", "H_s", "H_ci95", "H_reference_s", "verdict", "reasons", "D", "interval",
-             "playback_smape_percent", "governor_models", "data_quality", "window_errors", "criteria"}
+             "playback_smape_percent", "governor_models", "data_quality", "playback_windows", "criteria",
+             "playback_rms_percent_mbase", "playback_model", "parameters"}
 
 
 class Links(HTMLParser):
@@ -60,6 +64,10 @@ def test_fleet_json_and_report(ieee14):
         assert len(u["H_ci95"]) == 2 and u["H_ci95"][0] <= u["H_s"] <= u["H_ci95"][1]
         assert u["verdict"] in jd.VERDICTS and u["governor_models"] == ["TGOV1"]
         assert abs(u["H_error_percent"]) < 25.0
+        assert u["playback_model"] == "surrogate" and u["playback_windows"]["onset_s"] is not None
+        assert all(v is not None and v >= 0 for v in u["playback_rms_percent_mbase"].values())
+        assert set(u["parameters"]) == {"H", "D", "governor_correction"}
+        assert u["parameters"]["H"]["verdict"] == u["verdict"]
     assert doc["case"]["dyr_models_not_used"] == ["ESST3A", "EXST1"]
     assert all(i["sha256"] for i in doc["inputs"])
     rows = (out / "fleet.csv").read_text().splitlines()
@@ -102,6 +110,115 @@ columns = {time = "time_s", v_mag = "B2_G1/VM", v_ang = "B2_G1/VA", i_mag = "B2_
     for word in ("[case]", "[channels]", "[[unit]]", "[criteria]", "report.html", "fleet.json",
                  "units/<name>.html", "Exit status"):
         assert word in text
+
+
+def test_criteria_and_identify_typed_from_fields(tmp_path):
+    text = (BENCH / "fleet_ieee14.toml").read_text().replace('"data/', f'"{BENCH}/data/')
+    cfg = tmp_path / "fleet.toml"
+    cfg.write_text(text + "\n[criteria]\nmax_rms_percent_mbase_q = 7\n\n[identify]\nnoise_interval = \"sandwich\"\n"
+                   "bootstrap_draws = 0\noutput_error = true\nspread_scales = [0.5, 2.0]\n")
+    fl = load_fleet(cfg)
+    assert fl.criteria["max_rms_percent_mbase_q"] == 7.0 and fl.criteria["max_interval_percent"] == 10.0
+    assert fl.identify.bootstrap_draws == 0 and fl.identify.output_error is True
+    assert fl.identify.spread_scales == (0.5, 2.0)
+    for extra, key, words in (("[criteria]\nmax_peak_ratio = \"7\"", "criteria.max_peak_ratio", "number"),
+                              ("[criteria]\nmax_smape_x = 7", "criteria.max_smape_x", "unknown key"),
+                              ("[identify]\nbootstrap_draws = 8.0", "identify.bootstrap_draws", "integer"),
+                              ("[output]\nfigures = 1", "output.figures", "true or false")):
+        cfg.write_text(text + "\n" + extra + "\n")
+        with pytest.raises(jd.InputError, match=f"key '{key}'.*{words}"):
+            load_fleet(cfg)
+
+
+def _ieee14_case(tmp_path, *, dyr=None, raw=None, fleet=None) -> Path:
+    """The bench ieee14 fleet file in ``tmp_path``, with the .dyr/.raw copied there after
+    ``dyr(text)``/``raw(text)`` and the fleet text after ``fleet(text)``; the recording stays."""
+    data = BENCH / "data" / "ieee14"
+    for name, edit in (("ieee14.dyr", dyr), ("ieee14.raw", raw)):
+        text = (data / name).read_text()
+        (tmp_path / name).write_text(edit(text) if edit else text)
+    text = (BENCH / "fleet_ieee14.toml").read_text().replace('"data/ieee14/ieee14.', '"ieee14.')
+    text = text.replace('"data/', f'"{BENCH}/data/')
+    cfg = tmp_path / "fleet.toml"
+    cfg.write_text(fleet(text) if fleet else text)
+    return cfg
+
+
+def _same(a, b) -> bool:
+    la, lb = jax.tree_util.tree_leaves(a), jax.tree_util.tree_leaves(b)
+    return (jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)
+            and all(np.array_equal(np.asarray(x), np.asarray(y)) for x, y in zip(la, lb)))
+
+
+GENROU_B3 = "3 'GENROU' 1 6.5 0.06 0.2 0.05 5 0\n    1.8 1.75 0.6 0.8 0.34 0.15\n"
+
+
+def test_subtransient_below_leakage_runs_the_transient_model_and_says_so(tmp_path):
+    """The issue's case: a GENROU record with X''d below Xl ended the whole fleet with
+    "QAxisCircuits must have xl_pu < xq2_pu <= xq1_pu"; now that unit runs without its q-axis
+    circuits (the transient model) and carries a note, and the other units are unchanged."""
+    good = {p.name: p for p in load_fleet(BENCH / "fleet_ieee14.toml").plants}
+
+    def edit(text):
+        assert GENROU_B3 in text
+        return text.replace(GENROU_B3, GENROU_B3.replace("0.34 0.15", "0.12 0.15"))
+
+    fl = load_fleet(_ieee14_case(tmp_path, dyr=edit))
+    assert fl.skipped == () and [p.name for p in fl.plants] == list(good)
+    for p in fl.plants:
+        if p.name != "B3_G1":
+            assert p.fallbacks == () and _same(p.run.plant, good[p.name].run.plant)
+            assert p.run.h_reference_s == good[p.name].run.h_reference_s
+    b3 = next(p for p in fl.plants if p.name == "B3_G1")
+    assert b3.run.plant.machine.q_axis is None
+    # the same machine otherwise: its leaves are the good one's without the q-axis circuits'
+    assert _same(jax.tree_util.tree_leaves(b3.run.plant.machine),
+                 jax.tree_util.tree_leaves(good["B3_G1"].run.plant.machine)[:-5])
+    assert len(b3.fallbacks) == 1
+    note = b3.fallbacks[0]
+    assert note.startswith("GENROU on bus 3 id '1' (ieee14.dyr line ")
+    assert "X''d = 0.12 below Xl = 0.15" in note and "q-axis circuits left out (transient model)" in note
+    assert "\n" not in note
+
+
+@pytest.mark.slow
+def test_cli_fleet_with_a_bad_unit_runs_the_others(tmp_path, capsys, monkeypatch):
+    """`jaxdse fleet` on the ieee14 case plus a unit whose GENROU record has H < 0: exit 0, no
+    traceback, the five good plants run and fleet.json lists the bad one under "skipped" with
+    its reason. The plants have the ``ieee14`` fixture's shapes and settings (no compilation
+    after it), but running them still takes ~50 s on 2 cores: slow."""
+    gen3 = "3, '1', 40, 12.59713327, 15, -10, 1.01, 0, 100, 0, 0.34,"
+
+    def raw(text):
+        line = next(x for x in text.splitlines() if x.startswith(gen3))
+        return text.replace(line, line + "\n" + line.replace("3, '1',", "3, '2',", 1))
+
+    def dyr(text):
+        return text + "3 'GENROU' 2 6.5 0.06 0.2 0.05 -5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /\n" \
+            "3 'TGOV1' 2 0.05 0.1 1.2 0 1 2.1 0 /\n"
+
+    def fleet(text):
+        units = "".join(
+            f'\n[[unit]]\nname = "{name}"\nbus = {bus}\nids = ["{i}"]\ncolumns = {{time = "time_s", '
+            + ", ".join(f'{r} = "B{bus}_G1/{c}"' for r, c in (("frequency", "F"), ("v_mag", "VM"),
+                        ("v_ang", "VA"), ("i_mag", "IM"), ("i_ang", "IA"))) + "}\n"
+            for name, bus, i in (("B1_G1", 1, "1"), ("B2_G1", 2, "1"), ("B3_G1", 3, "1"),
+                                 ("B3_G2", 3, "2"), ("B6_G1", 6, "1"), ("B8_G1", 8, "1")))
+        return (text[:text.index("[channels]")] + units
+                + "\n[identify]\nbootstrap_draws = 8\n\n[output]\nfigures = false\n")
+
+    cfg = _ieee14_case(tmp_path, raw=raw, dyr=dyr, fleet=fleet)
+    # run_fleet's default stream is the sys.stderr of its import: point it at this test's
+    monkeypatch.setattr(run_fleet, "__defaults__", (sys.stderr,))
+    assert main(["fleet", str(cfg), "--out", str(tmp_path / "out")]) == 0
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "5 plant(s), 1 skipped" in err
+    doc = json.loads((tmp_path / "out" / "fleet.json").read_text())
+    assert [u["name"] for u in doc["units"]] == ["B1_G1", "B2_G1", "B3_G1", "B6_G1", "B8_G1"]
+    assert doc["summary"]["skipped"] == 1
+    (bad,) = doc["skipped"]
+    assert (bad["name"], bad["bus"]) == ("B3_G2", 3)
+    assert bad["reason"] == "GENROU on bus 3 id '2' (ieee14.dyr line 44): H = -5 must be > 0"
 
 
 def test_weighted_governor_sums_units():

@@ -144,8 +144,8 @@ def test_whitespace_text_in_several_files(short, tmp_path):
                               columns={"time": "Mag/Time", "v_mag": "Mag/bus 1|A 20.0",
                                        "v_ang": "Ang/bus 1|A 20.0", "i_mag": "Mag/br 1|A 20.0|2|B",
                                        "i_ang": "Ang/br 1|A 20.0|2|B"},
-                              voltage_unit="pu", current_unit="pu", delimiter="whitespace",
-                              quotechar="'", location="terminal", min_segment_s=10)
+                              voltage_unit="pu", current_unit="pu", location="terminal", min_segment_s=10,
+                              csv_options=jd.CsvOptions(delimiter="whitespace", quotechar="'"))
     segs, _ = jd.read_measurement(spec, jd.Machine())
     assert_same(rec, segs[0][1])
 

@@ -1,4 +1,5 @@
-"""Command-line interface: ``jaxdse run CONFIG.toml`` and ``jaxdse demo``.
+"""Command-line interface: ``jaxdse run CONFIG.toml``, ``sweep``, ``tune``, ``fleet FLEET.toml``
+and ``demo``.
 
 User mistakes end in a one-line error on stderr and exit status 2, never a traceback.
 """
@@ -167,8 +168,11 @@ FLEET.toml (paths relative to it):
   [[unit]]       or an explicit list instead of [channels]: name, bus, ids = ["1", ...]
                  (default: every in-service unit of the bus), columns = {time, v_mag, v_ang,
                  i_mag, i_ang, frequency}, current_direction
-  [criteria]     pass/fail limits: max_interval_percent (10), max_smape_i_t (5),
-                 max_smape_p_t (5), max_smape_q_t (10)
+  [criteria]     pass/fail limits (the Transmission Planner's, NERC MOD-026-2):
+                 max_interval_percent (10: H's 95 % interval), and the playback by
+                 window (pre-event, event, post-event): max_peak_ratio (1.25),
+                 min_damping_ratio_fraction (0.75), max_rms_percent_mbase_p (2),
+                 max_rms_percent_mbase_q (2), event_s (10), ... (see fleet.json)
   [observer] [settings] [identify]   as in `jaxdse run`;  [output] figures = true
 
 DIR gets:
@@ -185,18 +189,31 @@ DIR gets:
   DIR/fleet.csv, DIR/report.md   the table
 
 Exit status: 0 on success; 2 on bad input (missing .raw/.dyr or recording, unknown key, no
-plant found) with a one-line message.
+plant found) with a one-line message; 3 with --strict when any unit is not identified.
 
 example:
   jaxdse fleet experiments/naspi_osl_case1/fleet.toml --out osl_fleet/
+  jaxdse fleet experiments/andes_bench/fleet_ieee14.toml --out ieee14/ --strict
 """
 
 
-def _fleet(args) -> int:
-    from .fleet import load_fleet, run_fleet
+STRICT_HELP = "exit with status 3 when any unit's verdict is not 'identified'"
 
-    run_fleet(load_fleet(args.fleet), Path(args.out))
+
+def _strict(args, units: list[dict]) -> int:
+    """Exit status 3 under --strict when any unit's verdict is not "identified", else 0."""
+    shaky = [e["name"] for e in units if e["verdict"] != "identified"]
+    if args.strict and shaky:
+        print(f"jaxdse: --strict: {len(shaky)} unit(s) not identified: {', '.join(shaky)}", file=sys.stderr)
+        return 3
     return 0
+
+
+def _fleet(args) -> int:
+    from .fleet import run_fleet
+    from .fleet_file import load_fleet
+
+    return _strict(args, run_fleet(load_fleet(args.fleet), Path(args.out))["units"])
 
 
 def _sweep(args) -> int:
@@ -220,11 +237,7 @@ def _run(args) -> int:
     from .run import run_config
 
     summary = run_config(load_config(args.config), Path(args.out) if args.out else None)
-    shaky = [e["name"] for e in summary["recordings"] if e["verdict"] != "identified"]
-    if args.strict and shaky:
-        print(f"jaxdse: --strict: {len(shaky)} unit(s) not identified: {', '.join(shaky)}", file=sys.stderr)
-        return 3
-    return 0
+    return _strict(args, summary["recordings"])
 
 
 def _demo(args) -> int:
@@ -247,8 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", metavar="DIR", default=None,
                      help="output folder (default: [output] dir of the config, else jaxdse_out "
                           "beside it)")
-    run.add_argument("--strict", action="store_true",
-                     help="exit with status 3 when any unit's verdict is not 'identified'")
+    run.add_argument("--strict", action="store_true", help=STRICT_HELP)
     run.set_defaults(func=_run)
     for name, helptext, desc, func in (
             ("sweep", "run many observer configurations at once ([sweep] of the config)", SWEEP_HELP,
@@ -264,6 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
                         description=FLEET_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     fl.add_argument("fleet", metavar="FLEET.toml", help="fleet file (see `jaxdse fleet --help`)")
     fl.add_argument("--out", metavar="DIR", required=True, help="output folder")
+    fl.add_argument("--strict", action="store_true", help=STRICT_HELP)
     fl.set_defaults(func=_fleet)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,

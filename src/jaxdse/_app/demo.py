@@ -6,14 +6,10 @@ import sys
 import time
 from pathlib import Path
 
-import jax
-import numpy as np
-
 from .._core.drem import ObserverConfig
-from .._core.estimate import estimate
 from .._core.plant import Plant
 from .._core.settings import Settings
-from .._core.verdict import assess
+from .._many.runner import Unit, assess_units
 from .._sim.simulate import Event, Scenario, simulate
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
 
@@ -45,29 +41,17 @@ def run_demo(out_dir: Path, duration_s: float = 600.0, seed: int = 0, log=sys.st
         print(f"[jaxdse] simulating '{name}' ({sc.duration_s:.0f} s at {sc.frame_rate_hz:.0f} "
               f"frames/s, P = {sc.p_pu:.3f} pu)...", file=log, flush=True)
         sims[name] = simulate(plant, sc)
-    print("[jaxdse] estimating both recordings in one vmapped call...", file=log, flush=True)
+    print("[jaxdse] estimating and identifying both recordings in one vmapped call...", file=log,
+          flush=True)
     names = list(sims)
-    recs = jax.tree_util.tree_map(lambda *x: np.stack(x), *(sims[n].recording for n in names))
-    a2_ref = np.array([float(sims[n].truth.a2) for n in names])
-    settings = Settings(playback=False)  # the playback shown is the identified one (assess)
-
-    @jax.jit
-    @jax.vmap
-    def run(rec, a2):
-        est = estimate(rec, plant, config, settings, None, a2)
-        return est, assess(rec, plant, est, config, settings)
-
-    ests, (idents, reps, verds) = run(recs, a2_ref)
+    units = [Unit(n, sims[n].recording, plant, a2_reference=float(sims[n].truth.a2)) for n in names]
     entries = []
-    for k, name in enumerate(names):
-        est, ident, rep, verd = (jax.tree_util.tree_map(lambda x: x[k], t)
-                                 for t in (ests, idents, reps, verds))
+    for name, a in zip(names, assess_units(units, config, Settings())):
         truth = sims[name].truth
-        entries.append(summary_entry(name, est, ident, rep, verd, a2_reference=truth.a2,
-                                     h_reference_s=plant.machine.h_s))
-        write_estimates_csv(out_dir / f"estimates_{name}.csv", est, rep)
-        plot_estimates(est, name, out_dir, a1_reference=truth.a1, a2_reference=truth.a2, ident=ident,
-                       rep=rep, status=entries[-1]["verdict"])
+        entries.append(summary_entry(name, a, a2_reference=truth.a2, h_reference_s=plant.machine.h_s))
+        write_estimates_csv(out_dir / f"estimates_{name}.csv", a.estimate, a.replay)
+        plot_estimates(a.estimate, name, out_dir, a1_reference=truth.a1, a2_reference=truth.a2,
+                       ident=a.identified, rep=a.replay, status=entries[-1]["verdict"])
     write_summary(out_dir / "summary.json", entries,
                   {"source": "jaxdse demo: simulated plant (jaxdse.simulate), truth known",
                    "wall_time_s": round(time.perf_counter() - t0, 2)})

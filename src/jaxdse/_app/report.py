@@ -10,9 +10,10 @@ from pathlib import Path
 import numpy as np
 
 from .._core.estimate import Replay
-from .._core.identify import Identified
+from .._core.assess import Assessment
+from .._core.identify import Identified, condition_number
 from .._core.result import Estimate
-from .._core.verdict import REASONS, Verdict, describe
+from .._core.verdict import NOTES, REASONS, VERDICTS, describe, online_verdict
 
 
 def _playback(est: Estimate, rep: Replay | None):
@@ -48,13 +49,17 @@ def _pair(x):
     return [_num(x[0]), _num(x[1])]
 
 
-def summary_entry(name: str, est: Estimate, ident: Identified | None = None, rep: Replay | None = None,
-                  verdict: Verdict | None = None, a2_reference=None, h_reference_s=None) -> dict:
-    """One entry of ``summary.json["recordings"]``.
+def summary_entry(name: str, assessment: Assessment | Estimate, a2_reference=None, h_reference_s=None) -> dict:
+    """One entry of ``summary.json["recordings"]``: a serialiser of one unit's :class:`Assessment`
+    (an :class:`Estimate` alone counts as an assessment without identification).
 
     The headline values (``H_s``, ``H_ci95``, ``D``, ``verdict``) are the batch
     identification's when it ran; ``online`` holds the paper's DREM/I&I estimate beside them.
     """
+    if isinstance(assessment, Estimate):
+        assessment = Assessment(assessment, None, None, None)
+    est, ident, rep, verdict = assessment.estimate, assessment.identified, assessment.replay, \
+        assessment.verdict
     tr = est.trajectories
     x2_std = float(np.std(np.asarray(tr.x2_meas_rad_s)))
     after = np.asarray(est.time_s) >= (float(est.convergence_time_s) if bool(est.converged) else 0.0)
@@ -103,18 +108,54 @@ def summary_entry(name: str, est: Estimate, ident: Identified | None = None, rep
     if ident is not None:
         entry["identification"] = {
             "se_a1": _num(ident.se_a1), "se_a2": _num(ident.se_a2),
-            "relative_ci_percent": _num(100 * ident.relative_ci), "condition": _num(ident.condition),
+            "relative_ci_percent": _num(100 * ident.relative_ci),
+            "condition": _num(condition_number(ident.information)),
+            "h_variance_inflation": _num(ident.h_variance_inflation),
+            "H_without_damping_s": _num(ident.h_without_damping_s),
+            "H_without_governor_correction_s": _num(ident.h_without_governor_correction_s),
             "t_m_offset_pu": _num(ident.t_m_offset_pu), "output_error": bool(ident.output_error),
             "governor_gain_error": _num(ident.governor_gain_error), "samples": int(ident.samples)}
-    if verdict is not None:
-        word, keys = describe(verdict)
-        entry["verdict"] = word
-        entry["reasons"] = {k: REASONS[k] for k in keys}
-    else:
-        entry["verdict"] = "identified" if online["converged"] else "not identified"
-        entry["reasons"] = {} if online["converged"] else \
-            {"drem_not_converged": online["not_converged_reason"]}
+    if verdict is None:  # an Estimate alone: the online estimate's verdict, built in JAX
+        verdict = online_verdict(est)
+    word, keys = describe(verdict)
+    entry["verdict"] = word
+    entry["reasons"] = {k: _reason_text(k, ident, online) for k in keys}
+    entry["parameters"] = parameter_verdicts(verdict, keys, ident)
     return entry
+
+
+def _reason_text(key: str, ident, online: dict) -> str:
+    """A reason in words, with the unit's numbers where they say more than the rule."""
+    if key == "governor_model_off" and ident is not None:
+        g = float(ident.governor_gain_error)
+        return (f"the data ask for a governor response {abs(100 * g):.0f} % "
+                f"{'below' if g < 0 else 'above'} the model's")
+    if key == "negative_damping" and ident is not None:
+        return (f"D = {float(ident.d_pu_s):.3g} < 0 with 95 % confidence: the 3rd-order model lumps the "
+                "excitation and stabiliser damping into D")
+    if key in ("h_rests_on_damping", "h_rests_on_governor") and ident is not None:
+        alt = ident.h_without_damping_s if key == "h_rests_on_damping" else ident.h_without_governor_correction_s
+        lo, hi = (float(x) for x in ident.h_ci95)
+        return f"{REASONS[key]} (H = {float(alt):.3g} s against the interval {lo:.3g}-{hi:.3g} s)"
+    if key == "drem_not_converged" and online.get("not_converged_reason"):
+        return f"{REASONS[key]}: {online['not_converged_reason']}"
+    return REASONS[key]
+
+
+def parameter_verdicts(verdict, keys: list[str], ident) -> dict:
+    """The verdict of each parameter (H, D, the governor correction) with its reasons' keys."""
+    def word(code):
+        return VERDICTS[int(code)]
+
+    h_keys = [k for k in keys if k not in NOTES]
+    out = {"H": {"verdict": word(verdict.code), "reasons": h_keys}}
+    if ident is not None:
+        out["D"] = {"verdict": word(verdict.d_code),
+                    "reasons": [k for k in keys if k in ("negative_damping", "d_interval_wide")]}
+        out["governor_correction"] = {"verdict": word(verdict.governor_code),
+                                      "value_percent": _num(100 * ident.governor_gain_error),
+                                      "reasons": [k for k in keys if k == "governor_model_off"]}
+    return out
 
 
 def write_summary(path: Path, entries: list[dict], extra: dict | None = None) -> None:

@@ -13,59 +13,18 @@ import equinox as eqx
 import jax
 import numpy as np
 
-from .._core.recording import Recording
 from .._core.settings import Settings
-from .._core.verdict import NOTES, assess
-from .._io.config import GeneratorRun, RunConfig
+from .._core.verdict import NOTES
+from .._io.config import RunConfig
 from .._io.errors import InputError
 from .._io.measurement import read_measurement
-from .._many.batch import estimate_batch, pad_recording, select, stack
+from .._many.batch import estimate_batch
+from .._many.runner import Unit, assess_units
 from .._many.sweep import sweep_configs
 from .._many.tune import TUNABLE, TUNE_SETTINGS, config_values, tune
 from .._version import __version__
 from .progress import Progress
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
-
-BUCKETS_PER_OCTAVE = 4
-"""Recording lengths are padded up to one of 4 sizes per doubling (at most 19 % padding), so
-that the generators of a config share a few compiled shapes."""
-
-
-@dataclasses.dataclass
-class Unit:
-    """One recording segment of one generator."""
-
-    name: str
-    gen: GeneratorRun
-    t0: float
-    recording: Recording
-    quality: dict
-
-
-def bucket(n: int, minimum: int = 256) -> int:
-    """The padded length for ``n`` samples: the next of 4 sizes per octave (>= ``minimum``)."""
-    size = max(n, minimum)
-    octave = 1 << (size - 1).bit_length() - 1
-    for k in range(BUCKETS_PER_OCTAVE, 2 * BUCKETS_PER_OCTAVE + 1):
-        if size <= octave * k // BUCKETS_PER_OCTAVE:
-            return octave * k // BUCKETS_PER_OCTAVE
-    return 2 * octave
-
-
-def _group_key(u: Unit):
-    return (bucket(int(np.shape(u.recording.t_s)[0])), u.recording.location,
-            jax.tree_util.tree_structure(u.gen.plant))
-
-
-@eqx.filter_jit
-def _assess(recs, plants, online, config, settings, identify_settings, verdict_settings):
-    """Identification, replay with the identified parameters and verdict of every member of a
-    group, in one compiled call. A loop (``lax.map``), not ``vmap``: XLA's CPU runtime deadlocked
-    (every thread idle) on the vmapped identification of some groups; each unit's bootstrap
-    is still vmapped inside."""
-    return jax.lax.map(lambda a: assess(*a, config, settings, identify_settings, verdict_settings),
-                       (recs, plants, online))
-
 
 def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:
     """Estimate every generator of ``cfg``; write summary.json, CSVs and figures; return the summary.
@@ -78,53 +37,28 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
     """
     out_dir = Path(out_dir) if out_dir is not None else cfg.out_dir
     t_start = time.perf_counter()
-    units = []
+    units, gens, qualities = [], [], []
     for g in cfg.generators:
         segments, quality = read_measurement(g.measurement, g.plant.machine)
         for k, (t0, rec) in enumerate(segments):
-            units.append(Unit(g.name if len(segments) == 1 else f"{g.name}_part{k + 1}", g, t0, rec,
-                              quality))
-    groups: dict = {}
-    for u in units:
-        groups.setdefault(_group_key(u), []).append(u)
-    progress = Progress(len(cfg.generators) + 2 * len(groups) + len(units), stream)
+            units.append(Unit(g.name if len(segments) == 1 else f"{g.name}_part{k + 1}", rec, g.plant, t0,
+                              g.a2_reference))
+            gens.append(g)
+            qualities.append(quality)
+    progress = Progress(len(cfg.generators) + len(units), stream)
     for g in cfg.generators:
         progress.step(f"read {g.name}")
-    # With identification, the playback shown is the identified one (replay): the online
-    # estimator's own playback is not run.
-    settings = dataclasses.replace(cfg.settings, keep="trajectories", playback=cfg.identify is None)
-    results = {}
-    for (size, _, _), members in groups.items():
-        recs = stack([pad_recording(u.recording, size, with_frequency=True) for u in members])
-        plants = stack([u.gen.plant for u in members])
-        refs = np.array([np.nan if u.gen.a2_reference is None else u.gen.a2_reference for u in members])
-        est = estimate_batch(recs, plants, cfg.observer, settings, None, refs)
-        progress.step(f"online estimate of {len(members)} recording(s) of {size} samples")
-        assessed = None
-        if cfg.identify is not None:
-            online = eqx.tree_at(lambda e: e.trajectories, est, None)
-            assessed = jax.tree_util.tree_map(np.asarray, _assess(
-                recs, plants, online, cfg.observer, settings, cfg.identify, cfg.verdict))
-        progress.step(f"identification of {len(members)} recording(s)")
-        for k, u in enumerate(members):
-            results[u.name] = (est, assessed, k)
-
+    settings = dataclasses.replace(cfg.settings, keep="trajectories")
+    assessed = assess_units(units, cfg.observer, settings, cfg.identify, cfg.verdict,
+                            progress=lambda line: progress.step(f"assessed {line}"))
     out_dir.mkdir(parents=True, exist_ok=True)
     entries, inputs = [], {}
-    for u in units:
-        est_b, assessed, k = results[u.name]
-        n = int(np.shape(u.recording.t_s)[0])
-        est = _cut(select(est_b, k), n)
-        est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + u.t0)
-        ident = rep = verd = None
-        if assessed is not None:
-            ident, rep, verd = (select(x, k) for x in assessed)
-            rep = eqx.tree_at(lambda r: r.playback, rep, _cut(rep.playback, n))
-        entry = summary_entry(u.name, est, ident, rep, verd, a2_reference=u.gen.a2_reference,
-                              h_reference_s=u.gen.h_reference_s)
-        entries.append({"name": u.name, "role": u.gen.role, "generator": u.gen.name, **entry,
-                        "segment_start_s": u.t0, "data_quality": u.quality})
-        for f in u.gen.measurement.file:
+    for u, g, quality, a in zip(units, gens, qualities, assessed):
+        est, ident, rep = a.estimate, a.identified, a.replay
+        entry = summary_entry(u.name, a, a2_reference=g.a2_reference, h_reference_s=g.h_reference_s)
+        entries.append({"name": u.name, "role": g.role, "generator": g.name, **entry,
+                        "segment_start_s": u.t0_s, "data_quality": quality})
+        for f in g.measurement.file:
             inputs.setdefault(f, None)
         decisive = [k for k in entry["reasons"] if k not in NOTES]
         status = entry["verdict"] if not decisive else f"{entry['verdict']}: {decisive[0].replace('_', ' ')}"
@@ -134,7 +68,7 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
         if cfg.trajectories:
             write_estimates_csv(out_dir / f"estimates_{u.name}.csv", est, rep)
         if cfg.figures:
-            plot_estimates(est, u.name, out_dir, a2_reference=u.gen.a2_reference, ident=ident, rep=rep,
+            plot_estimates(est, u.name, out_dir, a2_reference=g.a2_reference, ident=ident, rep=rep,
                            status=status)
         progress.step(f"wrote {u.name}")
     summary = {
@@ -157,12 +91,6 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
           + (" and figures" if cfg.figures else "") + f" in {time.perf_counter() - t_start:.1f} s",
           file=stream)
     return {"recordings": entries, **summary}
-
-
-def _cut(tree, n: int):
-    """The first ``n`` samples of every per-sample array of a padded result."""
-    return jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) >= 1 and np.shape(x)[0] >= n and
-                                  np.shape(x)[0] > 4 else x, tree)
 
 
 def sha256(path: Path) -> str | None:

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .lti import hold_discretisation
+from .lti import hold_discretisation, solve_2x2
 from .machine import Machine, QAxisCircuits, electrical_torque
 from .signals import unwrap_continuing
 from .xla import hoist
@@ -100,7 +100,7 @@ def q_axis_lag(dq, psi_mag, q: QAxisCircuits, xq, dt, state0=None, iterations: i
 
     if state0 is None:  # equilibrium at the first sample: psi_d = 0, no correction
         iq0 = jnp.imag(dq[0])
-        x0 = -jnp.linalg.solve(a, b * iq0)
+        x0 = -solve_2x2(a, b * iq0)
         first = jnp.concatenate([x0, iq0[None]])
         corr0 = jnp.zeros((), dtype=psi_mag.dtype)
     else:

@@ -13,7 +13,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .drem import DremInputs, ObserverConfig, run_observer
-from .front_end import front_end, front_sums, playback_inputs, reference_torque
+from .front_end import FrontEnd, front_end, front_sums, playback_inputs, reference_torque
 from .governor import ScaledGovernor
 from .plant import Plant
 from .playback import Playback, playback
@@ -39,11 +39,16 @@ def estimate(recording: Recording, plant: Plant, config: ObserverConfig,
         An :class:`Estimate`. Pure: ``jax.jit``, ``jax.vmap`` and ``jax.grad`` pass through;
         :func:`jaxdse.estimate_batch` runs batches of recordings and/or configurations.
     """
-    ts = recording.t_s
+    fe = front_end(recording, plant, settings)
+    return estimate_front(recording.t_s, fe, reference_torque(recording.t_s, fe, plant.governor, settings),
+                          plant, config, settings, t_m, a2_reference)
+
+
+def estimate_front(ts, fe: FrontEnd, t_ref, plant: Plant, config: ObserverConfig,
+                   settings: Settings = Settings(), t_m=None, a2_reference=None) -> Estimate:
+    """:func:`estimate` on a front end computed once (``front_end``) and its T_ref [pu]."""
     dt = ts[1] - ts[0]
     keep = settings.keep == "trajectories"
-    fe = front_end(recording, plant, settings)
-    t_ref = reference_torque(ts, fe, plant.governor, settings)
     delta0 = fe.alg.delta_rad[0]
     t_m_in = external_torque(t_m, ts, settings)
     inputs = DremInputs(fe.alg.delta_rad - delta0, fe.alg.t_e_pu, fe.dw, t_m_in)
@@ -84,11 +89,10 @@ def external_torque(t_m, ts, settings: Settings):
     return jnp.asarray(t_m, dtype=ts.dtype)
 
 
-def scaled_governor(plant: Plant, t_ref, dw0, gain, offset) -> Plant:
+def scaled_governor(plant: Plant, t_m0, gain, offset) -> Plant:
     """``plant`` with its governor's response scaled by 1 + ``gain`` about its initial torque
-    and shifted by ``offset`` [pu]."""
+    ``t_m0`` [pu] and shifted by ``offset`` [pu]."""
     gov = plant.governor
-    t_m0 = gov.torque(gov.steady_state(t_ref, dw0), dw0)
     return eqx.tree_at(lambda p: p.governor, plant, ScaledGovernor(gov, gain, t_m0, offset))
 
 
@@ -114,11 +118,19 @@ def replay(recording: Recording, plant: Plant, a1, a2, settings: Settings = Sett
     scaled by 1 + ``governor_gain_error`` and shifted by ``t_m_offset`` [pu]
     (:class:`~jaxdse.ScaledGovernor`, as :func:`jaxdse.identify` fits them).
     """
-    ts = recording.t_s
-    dt = ts[1] - ts[0]
     fe = front_end(recording, plant, settings)
-    t_ref = reference_torque(ts, fe, plant.governor, settings)
-    plant = scaled_governor(plant, t_ref, fe.dw[0], governor_gain_error, t_m_offset)
+    t_ref = reference_torque(recording.t_s, fe, plant.governor, settings)
+    t_m0 = plant.governor.torque(plant.governor.steady_state(t_ref, fe.dw[0]), fe.dw[0])
+    return replay_front(recording.t_s, fe, t_ref, t_m0, plant, a1, a2, settings, t_m_offset,
+                        governor_gain_error)
+
+
+def replay_front(ts, fe: FrontEnd, t_ref, t_m0, plant: Plant, a1, a2, settings: Settings,
+                 t_m_offset=0.0, governor_gain_error=0.0) -> Replay:
+    """:func:`replay` on a front end computed once, its T_ref and the governor's initial
+    torque ``t_m0`` [pu] (those of the identification, whose corrections are relative to them)."""
+    dt = ts[1] - ts[0]
+    plant = scaled_governor(plant, t_m0, governor_gain_error, t_m_offset)
     pb_in, y0, measured = playback_inputs(fe, None, fe.alg.delta_rad[0], t_ref, plant,
                                           dataclasses.replace(settings, external_tm=False), dt)
     pb = playback(ts, pb_in, y0, a1, a2, plant.machine, settings.playback_integrator, plant.governor,

@@ -659,6 +659,12 @@ class GGOV1(AbstractGovernor):
         return self.r_pu * fsr + dw
 
 
+GOVERNORS: dict[str, type[AbstractGovernor]] = {
+    "TGOV1": TGOV1, "IEEEG1": IEEEG1, "GAST": GAST, "HYGOV": HYGOV, "GGOV1": GGOV1}
+"""The governor models by their PSS/E name: TOML ``[governor] model``, .dyr records and the
+fleet's governor slots (in this order)."""
+
+
 class ScaledGovernor(AbstractGovernor):
     """``base`` with its torque response scaled and shifted:
     Tm = Tm0 + (1 + gain)(Tm_base - Tm0) + offset.

@@ -21,12 +21,22 @@ governor's response). The regression is linear, so the solution is closed form:
   a2 towards zero (errors in the regressors);
 * iteratively reweighted least squares with Huber weights: the instants after a switching
   (a line trip), when the 3rd-order model is furthest from a real machine, are downweighted;
-* the interval has three parts, added in quadrature: the noise part, from a parametric
-  bootstrap (``bootstrap_draws`` refits, vmapped, on the recording with white noise of the
-  levels measured on it added once more; with 0 draws, the Newey-West sandwich, whose
-  Bartlett window ``hac_window_s`` covers the filtered residual's autocorrelation); the
+* the interval has three parts, added in quadrature: the noise part (``noise_interval``);
+  the
   filter spread (refits with F made slower and faster: a right model finds the same a2
   with any filter); and ``model_error``, the 3rd-order model's error against real machines.
+
+The noise part propagates white noise of the levels measured on the recording itself (second
+differences of |V|, |I|, the angles and f) through the whole front end and the weighted fit:
+
+* ``"bootstrap"`` (default): ``bootstrap_draws`` refits, vmapped, on the recording with
+  white noise of those levels added once more, each refit one Gauss-Newton step of the
+  weighted least squares with the fit's Huber weights (theta + A^-1 X_k^T W (z_k - X_k theta),
+  A = X^T W X). A first-order (delta-method) propagation is no substitute: the noise of |V|
+  and |I| enters a2's score through products of two noisy regressors (errors in variables),
+  and on the bench's recordings that second-order part is 2-4x the first-order one;
+* ``"sandwich"``: the Newey-West sandwich of the residuals, whose Bartlett window
+  ``hac_window_s`` covers the filtered residual's autocorrelation (no noise model).
 
 With ``IdentifySettings(output_error=True)`` the equation-error fit is the start of an
 output-error refinement: optimistix's Levenberg-Marquardt minimises the playback residual
@@ -38,16 +48,20 @@ so it is off by default (see ``experiments/andes_bench``).
 
 H = ws / (2 a2) and D = a1 / a2, with their 95 % intervals from the interval of a2 (a
 monotone map) and the delta method for D. The information matrix, scaled to unit diagonal,
-gives the condition number that tells whether a2 is separable from the other terms.
+gives the condition number (on the host) that tells whether a2 is separable from the other
+terms. The per-unit graph holds no LAPACK call (normal equations with an unrolled Cholesky,
+Taylor matrix exponentials), so that it vmaps over a fleet.
 """
 
 from __future__ import annotations
 
 import dataclasses
+from typing import Literal
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
@@ -55,7 +69,7 @@ from .drem import ObserverConfig
 from .estimate import scaled_governor
 from .front_end import FrontEnd, front_end, playback_inputs, reference_torque
 from .governor import AbstractGovernor
-from .lti import filter_states, lag_chain, zero_phase_lowpass
+from .lti import butterworth2, filter_states, hold_discretisation, lag_chain
 from .machine import damping_from_a, inertia_from_a2
 from .plant import Plant
 from .playback import playback
@@ -81,9 +95,10 @@ class IdentifySettings(eqx.Module):
     """Huber threshold in robust standard deviations (1.345: 95 % efficiency for Gaussian noise)."""
     hac_window_s: float = eqx.field(static=True, default=2.0)
     """Newey-West window of the residual autocorrelation [s]."""
+    noise_interval: Literal["bootstrap", "sandwich"] = eqx.field(static=True, default="bootstrap")
+    """How the noise part of the interval is found (see the module text)."""
     bootstrap_draws: int = eqx.field(static=True, default=32)
-    """Noise draws of the parametric bootstrap that gives the noise part of the interval
-    (0: the Newey-West sandwich instead)."""
+    """Noise draws of the parametric bootstrap (``noise_interval="bootstrap"``; at least 2)."""
     bootstrap_seed: int = eqx.field(static=True, default=0)
     """Seed of the bootstrap's noise (the result is a pure function of the recording)."""
     spread_scales: tuple[float, ...] = eqx.field(static=True, default=(0.5, 2.0))
@@ -99,6 +114,14 @@ class IdentifySettings(eqx.Module):
     """Refine the equation-error fit by output error on the playback (see the module text)."""
     output_error_steps: int = eqx.field(static=True, default=50)
     """Largest number of Levenberg-Marquardt steps of the output-error refinement."""
+
+    def __check_init__(self):
+        if self.noise_interval not in ("bootstrap", "sandwich"):
+            raise ValueError(f"IdentifySettings.noise_interval must be 'bootstrap' or 'sandwich', "
+                             f"got {self.noise_interval!r}")
+        if self.noise_interval == "bootstrap" and self.bootstrap_draws < 2:
+            raise ValueError("IdentifySettings.bootstrap_draws must be >= 2 for the bootstrap "
+                             f"(noise_interval='sandwich' needs none), got {self.bootstrap_draws}")
 
 
 class Identified(eqx.Module):
@@ -136,8 +159,23 @@ class Identified(eqx.Module):
     (``IdentifySettings.spread_scales``) [-]. Were the model right, every filter would find
     the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model
     that is off), which the residual's variance does not show."""
-    condition: Float[Array, ""]
-    """Condition number of the information matrix scaled to unit diagonal [-]."""
+    information: Float[Array, "4 4"]
+    """Information matrix of (a1, a2, c, g), scaled to unit diagonal [-]; its condition number
+    (:func:`condition_number`, on the host) tells whether a2 is separable from the others."""
+    t_ref_pu: Float[Array, ""]
+    """T_ref [pu] of the fit (the quasi-steady state's, shared with the online estimate and the
+    replay): the offset ``t_m_offset_pu`` is relative to it."""
+    t_m0_pu: Float[Array, ""]
+    """The governor model's initial torque [pu]: ``governor_gain_error`` scales the response
+    about it."""
+    h_variance_inflation: Float[Array, ""]
+    """Variance inflation of a2 [-]: how much the other parameters (D, the torque offset, the
+    governor correction) widen H's interval through their correlation with it (1: not at all)."""
+    h_without_damping_s: Float[Array, ""]
+    """H [s] of the same fit with D fixed at 0. Outside H's interval: H rests on D."""
+    h_without_governor_correction_s: Float[Array, ""]
+    """H [s] of the same fit with the governor correction fixed at 0 (the .dyr governor as it
+    is). Outside H's interval: H rests on correcting the governor model."""
     samples: Array
     """Samples used (valid, after ``settle_s``)."""
     ok: Array
@@ -163,78 +201,111 @@ def identify(recording: Recording, plant: Plant, config: ObserverConfig = Observ
     Returns:
         An :class:`Identified`. Pure: jit, vmap (fleets, noise draws) and grad pass through.
     """
+    fe = front_end(recording, plant, settings)
+    return identify_front(recording, fe, reference_torque(recording.t_s, fe, plant.governor, settings),
+                          plant, config, settings, identify_settings)
+
+
+def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, config: ObserverConfig,
+                   settings: Settings, identify_settings: IdentifySettings) -> Identified:
+    """:func:`identify` on a front end computed once (``front_end``) and its T_ref [pu], which
+    the online estimate and the replay share."""
     s = identify_settings
     ts = recording.t_s
     dt = ts[1] - ts[0]
-    fe = front_end(recording, plant, settings)
     valid = fe.valid & (ts >= ts[0] + s.settle_s)
     window = jnp.maximum(jnp.round(s.hac_window_s / dt), 1.0).astype(jnp.int32)
-    signals = _signals(ts, fe, recording, plant, settings, s, dt)
+    smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
+    poles = jnp.stack([config.lambda1, config.lambda2, config.lambda3])
+    filters = {k: hold_discretisation(*lag_chain(k * poles), dt) for k in (1.0, *s.spread_scales)}
+    signals, t_m0 = _signals(fe, recording, plant, t_ref, smoothing, dt)
 
-    def fit(scale):
-        poles = scale * jnp.stack([config.lambda1, config.lambda2, config.lambda3])
-        design, z = _regression(signals, poles, dt)
-        return design, _huber(design, z, valid, s.robust_iterations, s.huber_k)
+    def fit(disc, sig):
+        design, z = _regression(sig, disc)
+        return design, z, _huber(design, z, valid, s.robust_iterations, s.huber_k)
 
-    design, (theta, weights, slope, resid) = fit(1.0)
+    design, z, (theta, weights, slope, resid) = fit(filters[1.0], signals)
+    # What H rests on: the same weighted fit with D fixed at 0, and with the governor correction
+    # fixed at 0 (a column dropped: its row and column of the normal matrix become the identity).
+    normal, rhs = design.T @ (design * weights[:, None]), design.T @ (weights * z)
+    a2_without = jnp.stack([_fit_without(normal, rhs, j)[1] for j in (0, 3)])
     cov, info = _sandwich(design * (weights * resid)[:, None], (design * slope[:, None]).T @ design, window)
-    others = jnp.stack([fit(k)[1][0][1] for k in s.spread_scales]) if s.spread_scales else theta[1:2]
+    if s.spread_scales:  # the same samples weighted as in the fit: one weighted solve per filter
+        def refit(disc):
+            x, zz = _regression(signals, disc)
+            return solve_spd(x.T @ (x * weights[:, None]), x.T @ (weights * zz))[1]
+
+        others = jax.vmap(refit)(
+            jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(filters[k] for k in s.spread_scales)))
+    else:
+        others = theta[1:2]
     spread = jnp.max(jnp.abs(others / theta[1] - 1.0))
     levels = noise_levels(recording, fe.valid)
-    if s.bootstrap_draws:
-        def draw(key):
-            noisy = add_noise(recording, levels, key)
-            fe_k = front_end(noisy, plant, settings)
-            poles = jnp.stack([config.lambda1, config.lambda2, config.lambda3])
-            design_k, z_k = _regression(_signals(ts, fe_k, noisy, plant, settings, s, dt), poles, dt)
-            return _huber(design_k, z_k, valid, s.robust_iterations, s.huber_k)[0]
+    if s.noise_interval == "bootstrap":
+        def draw(key):  # one Gauss-Newton step of the weighted fit on the recording with more noise
+            # Each sample's noise from its own index: a padded recording gets the same draws.
+            e = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(key, k), (5,), dtype=ts.dtype))(
+                jnp.arange(ts.shape[0])).T
+            noisy = add_noise(recording, levels, e)
+            x, z = _regression(_signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing,
+                                        dt)[0], filters[1.0])
+            return theta + bread @ (x.T @ (weights * (z - x @ theta)))
 
+        bread = solve_spd(normal, jnp.eye(4, dtype=ts.dtype))
         keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
         cov = jnp.cov(jax.vmap(draw)(keys), rowvar=False)
     ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, levels, jnp.array(False),
-                 s.model_error)
+                 s.model_error, t_ref, t_m0, a2_without)
     if not s.output_error:
         return ee
-    oe = _output_error(ts, fe, plant, settings, s, ee, valid, window, dt, spread, levels)
+    oe = _output_error(ts, fe, t_ref, plant, settings, s, ee, valid, window, dt, spread, levels)
     return jax.tree_util.tree_map(lambda a, b: jnp.where(oe.output_error, a, b), oe, ee)
 
 
-def _signals(ts, fe: FrontEnd, recording: Recording, plant: Plant, settings: Settings,
-             s: IdentifySettings, dt):
-    """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1, Tm - Tm(0).
+def _fit_without(normal, rhs, j: int):
+    """The weighted least-squares solution with coefficient ``j`` fixed at 0."""
+    keep = jnp.arange(normal.shape[0]) != j
+    mask = keep[:, None] & keep[None, :]
+    return solve_spd(jnp.where(mask, normal, jnp.eye(normal.shape[0], dtype=normal.dtype)),
+                     jnp.where(keep, rhs, 0.0))
+
+
+def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt):
+    """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
+    Tm - Tm(0); and Tm(0) [pu].
 
     Without a frequency channel, f would be the smoothed derivative of theta: then the bus
     term is 0 and the rotor term is delta itself (x2 = d delta/dt, differentiated exactly by
     the filter; the smoothing would bias H by ~2 %).
     """
-    dw = zero_phase_lowpass(fe.x2_meas, dt, s.governor_smoothing_hz) / plant.machine.omega_s
-    t_ref = reference_torque(ts, fe._replace(dw=dw), plant.governor, settings)
+    x2 = filter_states(smoothing, fe.x2_meas)[:, 0]
+    dw = filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
     t_m = governor_torque(plant.governor, dw, dt, t_ref)
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
     bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (fe.f_hz - plant.machine.f_nominal_hz))
     rotor = jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_ref)
-    return jnp.stack([bus, rotor, t_m - fe.alg.t_e_pu, jnp.ones_like(ts), t_m - t_m[0]])
+    one = jnp.ones_like(bus)
+    return jnp.stack([bus, rotor, t_m - fe.alg.t_e_pu, one, t_m - t_m[0]]), t_m[0]
 
 
-def _regression(signals, poles, dt):
+def _regression(signals, discretisation):
     """(design matrix [T, 4], left-hand side z [T]) of the swing equation filtered by the
-    3rd-order filter with ``poles`` [rad/s]."""
-    a, b = lag_chain(poles)
-    bus, rotor, torque, one, gov = jax.vmap(lambda u: filter_states(a, b, u, dt))(signals)
+    3rd-order filter of ``discretisation`` (:func:`~jaxdse._core.lti.hold_discretisation` of
+    its :func:`~jaxdse._core.lti.lag_chain`)."""
+    bus, rotor, torque, one, gov = jax.vmap(lambda u: filter_states(discretisation, u))(signals)
     # x2 = 2 pi (f - f0) + d(delta - theta)/dt (Remark 2): the derivatives are the filter's own
     # (exact), not the smoothed ones of the front end, which attenuate a 1.5 Hz swing by ~9 %.
     fx2, fsx2 = bus[:, 0] + rotor[:, 1], bus[:, 1] + rotor[:, 2]
     return jnp.stack([-fx2, torque[:, 0], one[:, 0], gov[:, 0]], axis=1), fsx2
 
 
-def _output_error(ts, fe: FrontEnd, plant: Plant, settings: Settings, s: IdentifySettings,
+def _output_error(ts, fe: FrontEnd, t_ref, plant: Plant, settings: Settings, s: IdentifySettings,
                   start: Identified, valid, window, dt, spread, levels) -> Identified:
     """Levenberg-Marquardt on the playback residual over p = (a1, ln(a2/a2_0), offset, gain)."""
     w_s = plant.machine.omega_s
     integ = settings.playback_integrator
     if integ.adaptive:  # forward-mode Jacobians through diffrax
         integ = dataclasses.replace(integ, forward_mode=True)
-    t_ref = reference_torque(ts, fe, plant.governor, settings)
     inputs, y0, measured = playback_inputs(fe, None, fe.alg.delta_rad[0], t_ref, plant,
                                            dataclasses.replace(settings, external_tm=False), dt)
     meas = jnp.stack(measured)
@@ -245,7 +316,7 @@ def _output_error(ts, fe: FrontEnd, plant: Plant, settings: Settings, s: Identif
                    jnp.zeros(4))
 
     def residual(p, _):
-        pl = scaled_governor(plant, t_ref, fe.dw[0], p[3], p[2])
+        pl = scaled_governor(plant, t_ref, start.t_m0_pu, p[3], p[2])
         pb = playback(ts, inputs, y0, p[0], a2_0 * jnp.exp(p[1]), pl.machine, integ, pl.governor,
                       t_ref, measured=measured, n_valid=fe.n, block=settings.block_samples,
                       save_trajectory=True)
@@ -267,8 +338,11 @@ def _output_error(ts, fe: FrontEnd, plant: Plant, settings: Settings, s: Identif
     cov_p, info = _sandwich(jnp.einsum("otp,ot->tp", jac, r), jnp.einsum("otp,otq->pq", jac, jac), window)
     theta = jnp.stack([p[0], a2, a2 * p[2], a2 * p[3]])
     converged = (sol.result == optx.RESULTS.successful) & usable
+    # The alternatives stay the equation error's (H = ws / 2 a2 is its own inverse map).
+    a2_without = inertia_from_a2(jnp.stack([start.h_without_damping_s, start.h_without_governor_correction_s]),
+                                 w_s)
     return _result(theta, to_theta @ cov_p @ to_theta.T, info, w_s, jnp.sum(valid), spread, levels,
-                   converged, s.model_error)
+                   converged, s.model_error, t_ref, start.t_m0_pu, a2_without)
 
 
 def noise_levels(recording: Recording, valid) -> Array:
@@ -277,8 +351,8 @@ def noise_levels(recording: Recording, valid) -> Array:
     def level(x):
         d2 = x[2:] - 2.0 * x[1:-1] + x[:-2]
         ok = valid[2:] & jnp.isfinite(d2)
-        med = _masked_median(d2, ok)
-        return jnp.where(jnp.any(ok), 1.4826 * _masked_median(jnp.abs(d2 - med), ok) / jnp.sqrt(6.0),
+        med = masked_median(d2, ok)
+        return jnp.where(jnp.any(ok), 1.4826 * masked_median(jnp.abs(d2 - med), ok) / jnp.sqrt(6.0),
                          jnp.nan)
 
     f = recording.f_hz if recording.f_hz is not None else jnp.full_like(recording.t_s, jnp.nan)
@@ -286,9 +360,9 @@ def noise_levels(recording: Recording, valid) -> Array:
                       level(jnp.log(recording.i_mag_pu)), level(recording.i_ang_rad), level(f)])
 
 
-def add_noise(recording: Recording, levels, key) -> Recording:
-    """``recording`` with white Gaussian noise of ``levels`` added once more (the bootstrap's draw)."""
-    e = jax.random.normal(key, (5,) + recording.t_s.shape, dtype=recording.t_s.dtype)
+def add_noise(recording: Recording, levels, e) -> Recording:
+    """``recording`` with white noise ``levels`` * ``e`` added once more (``e``: [5, T], standard
+    normal for a bootstrap draw; the channels as ``Identified.noise_levels``)."""
     lv = jnp.where(jnp.isfinite(levels), levels, 0.0)
     fields = [recording.v_mag_pu * jnp.exp(lv[0] * e[0]), recording.v_ang_rad + lv[1] * e[1],
               recording.i_mag_pu * jnp.exp(lv[2] * e[2]), recording.i_ang_rad + lv[3] * e[3]]
@@ -302,8 +376,8 @@ def _noise_level(x, valid):
     """Robust standard deviation of white noise on ``x``: the MAD of its first differences / sqrt 2."""
     d = jnp.diff(x, prepend=x[:1])
     ok = valid & jnp.roll(valid, 1)
-    med = _masked_median(d, ok)
-    return jnp.maximum(1.4826 * _masked_median(jnp.abs(d - med), ok) / jnp.sqrt(2.0), 1e-12)
+    med = masked_median(d, ok)
+    return jnp.maximum(1.4826 * masked_median(jnp.abs(d - med), ok) / jnp.sqrt(2.0), 1e-12)
 
 
 def governor_torque(gov: AbstractGovernor, dw, dt, t_ref):
@@ -321,8 +395,14 @@ def governor_torque(gov: AbstractGovernor, dw, dt, t_ref):
     return jnp.concatenate([gov.torque(x0, dw[0])[None], tm])
 
 
+SCALE_UPDATES = 3
+"""Reweighting steps of the Huber fit that re-estimate the residual's scale (MAD); the later
+steps keep the last one (the scale settles in ~2 steps; each estimate costs two medians)."""
+
+
 def _huber(x, y, valid, iterations, k):
-    """Huber regression by iteratively reweighted least squares (scale: MAD of the residual).
+    """Huber regression by iteratively reweighted least squares (scale: MAD of the residual,
+    re-estimated in the first ``SCALE_UPDATES`` steps, then held).
 
     Returns (theta, psi(r) / r, psi'(r), r) at the solution: the weights of the sandwich's
     scores and of its information matrix (with the IRLS weights in the information matrix
@@ -331,36 +411,89 @@ def _huber(x, y, valid, iterations, k):
     """
     def solve(w):
         w = jnp.where(valid, w, 0.0)
-        xw = x * w[:, None]
-        # Columns scaled to unit norm first: a2's regressor and the constant differ by 1e3.
-        scale = jnp.sqrt(jnp.sum(xw * x, axis=0)) + 1e-300
-        xs = x / scale[None, :]
-        theta_s = jnp.linalg.lstsq(xs * jnp.sqrt(w)[:, None], y * jnp.sqrt(w), rcond=None)[0]
-        return theta_s / scale
+        return solve_spd(x.T @ (x * w[:, None]), x.T @ (w * y))
 
-    def weights(theta):
-        r = y - x @ theta
-        med = _masked_median(r, valid)
-        sigma = 1.4826 * _masked_median(jnp.abs(r - med), valid)
+    def scale(r):
+        med = masked_median(r, valid)
+        return 1.4826 * masked_median(jnp.abs(r - med), valid)
+
+    def weights(r, sigma):
         u = jnp.abs(r) / (k * jnp.maximum(sigma, 1e-300))
-        return jnp.where(u <= 1.0, 1.0, 1.0 / u), u <= 1.0, r
+        return jnp.where(u <= 1.0, 1.0, 1.0 / u), u <= 1.0
 
-    w = jnp.ones_like(y)
-    w, _ = jax.lax.scan(lambda w, _: (weights(solve(w))[0], None), w, None, length=iterations)
+    w, sigma = jnp.ones_like(y), jnp.ones((), y.dtype)
+    for _ in range(min(iterations, SCALE_UPDATES)):  # unrolled: a cond would run both under vmap
+        r = y - x @ solve(w)
+        sigma = scale(r)
+        w = weights(r, sigma)[0]
+    w, _ = jax.lax.scan(lambda w, _: (weights(y - x @ solve(w), sigma)[0], None), w, None,
+                        length=max(iterations - SCALE_UPDATES, 0))
     theta = solve(w)
-    w, inside, r = weights(theta)
+    r = y - x @ theta
+    w, inside = weights(r, sigma)
     if iterations == 0:  # ordinary least squares
         w, inside = jnp.ones_like(y), jnp.ones_like(y, dtype=bool)
     return theta, jnp.where(valid, w, 0.0), jnp.where(valid & inside, 1.0, 0.0), r
 
 
-def _masked_median(x, mask):
-    """Median of ``x[mask]`` with a static shape (masked entries sorted to the end)."""
+PIVOT_FLOOR = 1e-14
+"""Smallest pivot of the unit-diagonal Cholesky factorisation [-]: a direction of the
+information matrix below it (a condition number above ~1e14) gets a variance of ~1e14 times
+its scale instead of a division by zero, so that its interval comes out unbounded, not NaN."""
+
+
+def solve_spd(a, b):
+    """a^-1 b for a small symmetric positive (semi-)definite ``a`` [p, p] (b: [p] or [p, k]):
+    scaled to unit diagonal, then an unrolled Cholesky factorisation and two triangular
+    solves. No LAPACK call, so it batches cleanly under vmap (p = 4 here). In float64 it keeps
+    about 8 digits at a condition number of 1e8; data worse than that cannot identify H."""
+    p = a.shape[0]
+    d = jnp.sqrt(jnp.maximum(jnp.diag(a), 1e-300))
+    a = a / jnp.outer(d, d)
+    rhs = b / (d[:, None] if b.ndim == 2 else d)
+    low = [[None] * p for _ in range(p)]
+    for j in range(p):
+        pivot = a[j, j] - sum((low[j][k] ** 2 for k in range(j)), 0.0)
+        low[j][j] = jnp.sqrt(jnp.maximum(pivot, PIVOT_FLOOR))
+        for i in range(j + 1, p):
+            low[i][j] = (a[i, j] - sum((low[i][k] * low[j][k] for k in range(j)), 0.0)) / low[j][j]
+    z = [None] * p
+    for i in range(p):
+        z[i] = (rhs[i] - sum((low[i][k] * z[k] for k in range(i)), 0.0)) / low[i][i]
+    out = [None] * p
+    for i in reversed(range(p)):
+        out[i] = (z[i] - sum((low[k][i] * out[k] for k in range(i + 1, p)), 0.0)) / low[i][i]
+    out = jnp.stack(out)
+    return out / (d[:, None] if b.ndim == 2 else d)
+
+
+MEDIAN_BISECTIONS = 52
+"""Halvings of the data's range in :func:`masked_median` (2^-52: float64's resolution)."""
+
+
+def masked_median(x, mask):
+    """Median of ``x[mask]`` with a static shape (NaN when nothing is masked in).
+
+    By bisection on the value, not by sorting: each step counts the samples below the
+    midpoint of the two middle order statistics' brackets, and the last step takes the
+    largest sample within each bracket, so the result is exact (sorting a recording costs
+    ~10x more on CPU, and the Huber fit takes two medians per reweighting step)."""
     n = jnp.sum(mask)
-    xs = jnp.sort(jnp.where(mask, x, jnp.inf))
-    lo = xs[jnp.maximum((n - 1) // 2, 0)]
-    hi = xs[jnp.maximum(n // 2, 0)]
-    return 0.5 * (lo + hi)
+    ranks = jnp.stack([(n - 1) // 2, n // 2]) + 1  # the two middle order statistics, 1-based
+    lo0 = jnp.min(jnp.where(mask, x, jnp.inf))
+    hi0 = jnp.max(jnp.where(mask, x, -jnp.inf))
+    init = (jnp.full(2, lo0), jnp.full(2, hi0))
+
+    def halve(_, bracket):
+        lo, hi = bracket  # invariant: count(x <= hi) >= rank; count(x <= lo) < rank unless lo = min
+        mid = 0.5 * (lo + hi)
+        count = jnp.sum(mask[None, :] & (x[None, :] <= mid[:, None]), axis=1)
+        above = count >= ranks
+        return jnp.where(above, lo, mid), jnp.where(above, mid, hi)
+
+    _, hi = jax.lax.fori_loop(0, MEDIAN_BISECTIONS, halve, init)
+    stats = jnp.max(jnp.where(mask[None, :] & (x[None, :] <= hi[:, None]), x[None, :], -jnp.inf), axis=1)
+    return jnp.where(n > 0, 0.5 * (stats[0] + stats[1]), jnp.nan)
 
 
 def _sandwich(scores, info, window):
@@ -376,11 +509,12 @@ def _sandwich(scores, info, window):
     start = jnp.arange(-n, n)  # blocks before the record are empty: no contribution
     blocks = csum[jnp.clip(start + window + 1, 0, n)] - csum[jnp.clip(start, 0, n)]
     meat = blocks.T @ blocks / (window + 1.0)
-    bread = jnp.linalg.pinv(info)
+    bread = solve_spd(info, jnp.eye(info.shape[0], dtype=info.dtype))
     return bread @ meat @ bread, info
 
 
-def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_error) -> Identified:
+def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_error, t_ref,
+            t_m0, a2_without) -> Identified:
     a1, a2, c, g = theta[0], theta[1], theta[2], theta[3]
     se = jnp.sqrt(jnp.maximum(jnp.diag(cov), 0.0))
     half = jnp.sqrt((Z95 * se[1]) ** 2 + (spread**2 + model_error**2) * a2**2)
@@ -392,8 +526,11 @@ def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_
     se_d = jnp.sqrt(jnp.maximum(grad @ cov[:2, :2] @ grad, 0.0))
     d = damping_from_a(a1, a2)
     diag = jnp.sqrt(jnp.maximum(jnp.diag(info), 1e-300))
-    eig = jnp.linalg.eigvalsh(info / jnp.outer(diag, diag))
-    condition = eig[-1] / jnp.maximum(eig[0], 1e-300)
+    scaled = info / jnp.outer(diag, diag)
+    # Variance inflation of a2: its variance against the one it would have were the other
+    # regressors orthogonal to it (the (2, 2) element of the inverse of the scaled information).
+    vif = solve_spd(scaled, jnp.eye(4, dtype=scaled.dtype))[1, 1]
+    h_without = inertia_from_a2(a2_without, w_s)
     values = (a1, a2, inertia_from_a2(a2, w_s), d, se[0], se[1], c / a2, g / a2, spread)
     ok = jnp.all(jnp.isfinite(jnp.stack(values))) & jnp.all(jnp.isfinite(cov))
     return Identified(
@@ -401,6 +538,14 @@ def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_
         h_ci95=jnp.stack([h_lo, h_hi]), d_ci95=jnp.stack([d - Z95 * se_d, d + Z95 * se_d]),
         se_a1=se[0], se_a2=se[1], covariance=cov, t_m_offset_pu=c / a2,
         governor_gain_error=g / a2, relative_ci=half / jnp.abs(a2),
-        relative_ci_noise=Z95 * se[1] / jnp.abs(a2), filter_spread=spread, condition=condition,
+        relative_ci_noise=Z95 * se[1] / jnp.abs(a2), filter_spread=spread,
+        information=scaled, t_ref_pu=t_ref, t_m0_pu=t_m0, h_variance_inflation=vif,
+        h_without_damping_s=h_without[0], h_without_governor_correction_s=h_without[1],
         noise_levels=levels, samples=samples, ok=ok, output_error=output_error,
     )
+
+
+def condition_number(information) -> float:
+    """Condition number of an :attr:`Identified.information` matrix (host side, NumPy)."""
+    eig = np.linalg.eigvalsh(np.asarray(information, dtype=float))
+    return float(eig[-1] / max(eig[0], 1e-300)) if np.all(np.isfinite(eig)) else float("nan")

@@ -109,13 +109,14 @@ def build_estimate(dt, n, segments: DremSegments, segment_samples: int, theta_la
     a1, a2 = theta_last[0], theta_last[1]
     n_seg = segments.count.shape[0]
     start = jnp.arange(n_seg) * segment_samples
-    target = a2 if a2_reference is None else a2_reference
+    # A reference of NaN (a batch whose other members know theirs) counts as none.
+    known = jnp.isfinite(jnp.nan if a2_reference is None else a2_reference)
+    target = jnp.where(known, jnp.nan if a2_reference is None else a2_reference, a2)
     k_conv = settled_from(segments.a2_min, segments.a2_max, target, settings.convergence_band)
     n_valid_seg = -(-n // segment_samples)
     t_conv = jnp.minimum(start[jnp.minimum(k_conv, n_seg - 1)], n - 1) * dt
     held = k_conv < n_valid_seg
-    if a2_reference is None:
-        held = held & ((n - 1) * dt - t_conv >= settings.min_hold_s)
+    held = held & (known | ((n - 1) * dt - t_conv >= settings.min_hold_s))
     count = jnp.maximum(sums.count, 1)
     online = sums.i_mag / count > settings.offline_current_pu
     excited = log_contraction[1] >= settings.min_log_contraction

@@ -170,27 +170,13 @@ class MeasurementSpec:
     max_gap_s: float = 0.5
     on_long_gap: str = "split"
     min_segment_s: float = 30.0
-    delimiter: str | None = None
-    """CSV separator (",", ";", "\\t", "|" or "whitespace"); None: detected from the header."""
-    quotechar: str = '"'
-    decimal: str | None = None
-    """CSV decimal mark "." or ","; None: detected."""
-    na_values: tuple[str, ...] = ()
-    """Extra words that mark a missing value in a CSV."""
-    skip_rows: int = 0
-    """Metadata lines before the CSV header."""
-    units_row: bool | None = None
-    """A units row under the CSV header; None: detected."""
+    csv_options: CsvOptions = CsvOptions()
+    """How to read a CSV export (separator, decimal mark, missing-value words, rows to skip,
+    units row); in TOML, these are keys of [measurement] itself (``delimiter = ";"``)."""
 
     @property
     def three_phase(self) -> bool:
         return any(k in self.columns for k in THREE_PHASE)
-
-    @property
-    def csv_options(self) -> CsvOptions:
-        return CsvOptions(delimiter=self.delimiter, quotechar=self.quotechar, decimal=self.decimal,
-                          na_values=tuple(self.na_values), skip_rows=self.skip_rows,
-                          units_row=self.units_row)
 
 
 def read_measurement(spec: MeasurementSpec, machine: Machine | None = None):

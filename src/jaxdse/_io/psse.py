@@ -21,6 +21,12 @@ flow raw data file", revisions 32 and 33):
   same leading fields in both (rev 34 inserts NREG after IREG, hence 34+ is refused). Fields
   are read by position; trailing fields may be omitted (PSS/E defaults) and extra trailing
   fields are ignored.
+
+Both readers take ``strict``: by default a malformed record raises :class:`InputError`; with
+``strict=False`` (``jaxdse fleet``) a malformed record that can still be told apart (its bus
+and machine ID read) is kept with its ``problem`` (the one-line message strict reading would
+raise), so that only the units it belongs to are left out; records that cannot be attributed
+are dropped and listed in ``problems`` of the file.
 """
 
 from __future__ import annotations
@@ -28,10 +34,10 @@ from __future__ import annotations
 import math
 import re
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .._core.governor import GAST, GGOV1, HYGOV, IEEEG1, TGOV1, AbstractGovernor
+from .._core.governor import GOVERNORS, AbstractGovernor
 from .errors import InputError
 
 SUPPORTED_RAW_REVISIONS = (32, 33)
@@ -67,7 +73,38 @@ GOVERNOR_FIELDS = {
 }
 OPTIONAL_TRAILING = {"GENTPJ": 1}
 """Models whose last constants may be omitted (GENTPJ's Kis; default 0)."""
+GOVERNOR_PARAMETERS = {
+    "TGOV1": {"r_pu": "R", "t1_s": "T1", "v_max_pu": "VMAX", "v_min_pu": "VMIN", "t2_s": "T2",
+        "t3_s": "T3", "dt_pu": "Dt"},
+    "IEEEG1": {"k": "K", "t1_s": "T1", "t2_s": "T2", "t3_s": "T3", "uo_pu_s": "Uo",
+        "uc_pu_s": "Uc", "p_max_pu": "PMAX", "p_min_pu": "PMIN", "t4_s": "T4", "k1": "K1",
+        "k2": "K2", "t5_s": "T5", "k3": "K3", "k4": "K4", "t6_s": "T6", "k5": "K5", "k6": "K6",
+        "t7_s": "T7", "k7": "K7", "k8": "K8"},
+    "GAST": {"r_pu": "R", "t1_s": "T1", "t2_s": "T2", "t3_s": "T3", "at_pu": "AT", "kt_pu": "KT",
+        "v_max_pu": "VMAX", "v_min_pu": "VMIN", "dturb_pu": "DTURB"},
+    "HYGOV": {"r_pu": "R", "r_temp_pu": "r", "tr_s": "Tr", "tf_s": "Tf", "tg_s": "Tg",
+        "velm_pu_s": "VELM", "g_max_pu": "GMAX", "g_min_pu": "GMIN", "tw_s": "TW", "at_pu": "At",
+        "dturb_pu": "Dturb", "q_nl_pu": "qNL"},
+    "GGOV1": {"r_pu": "R", "t_pelec_s": "Tpelec", "maxerr_pu": "maxerr", "minerr_pu": "minerr",
+        "kpgov": "Kpgov", "kigov": "Kigov", "kdgov": "Kdgov", "t_dgov_s": "Tdgov",
+        "v_max_pu": "Vmax", "v_min_pu": "Vmin", "t_act_s": "Tact", "k_turb": "Kturb",
+        "w_fnl_pu": "Wfnl", "t_b_s": "Tb", "t_c_s": "Tc", "t_eng_s": "Teng",
+        "t_fload_s": "Tfload", "kpload": "Kpload", "kiload": "Kiload", "ldref_pu": "Ldref",
+        "dm_pu": "Dm", "r_open_pu_s": "Ropen", "r_close_pu_s": "Rclose", "kimw": "Kimw",
+        "aset_pu_s": "Aset", "ka": "Ka", "t_a_s": "Ta", "trate_mw": "Trate", "db_pu": "db",
+        "t_sa_s": "Tsa", "t_sb_s": "Tsb", "rup_pu_s": "Rup", "rdown_pu_s": "Rdown"},
+}
+"""Field of the governor module (``GOVERNORS[model]``) -> the PSS/E constant it takes; GGOV1's
+Rselect and Flag (integers) and its base ratio are set apart."""
 TYPED_MODELS = {**MACHINE_FIELDS, **GOVERNOR_FIELDS}
+PSSE_GOVERNOR_MODELS = frozenset({
+    "BBGOV1", "CRCMGV", "DEGOV", "DEGOV1", "GAST", "GAST2A", "GASTWD", "GGOV1", "GGOV2", "GGOV3",
+    "GOVCT1", "GOVCT2", "H6E", "HYGOV", "HYGOV2", "HYGOVM", "HYGOVT", "HYGOVR", "IEEEG1",
+    "IEEEG2", "IEEEG3", "IEESGO", "IVOGO", "PIDGOV", "TGOV1", "TGOV2", "TGOV3", "TGOV4",
+    "TGOV5", "TURCZT", "TWDM1T", "TWDM2T", "URCSCT", "URGS3T", "WEHGOV", "WESGOV", "WPIDHY",
+    "WSHYDD", "WSHYGP", "WSIEG1"})
+"""Turbine-governor models of the PSS/E model library (typed or not): a unit whose governor
+record is one jaxdse does not model runs with constant mechanical torque, and says so."""
 
 _NUMBER = re.compile(r"^[+-]?(\d+\.?\d*|\.\d+)([eEdD][+-]?\d+)?$")
 
@@ -99,6 +136,10 @@ class DyrRecord:
     """1-based line number of the record's first line."""
     source: str = field(default="", repr=False)
     params: dict = field(default_factory=dict, repr=False)
+    problem: str | None = field(default=None, repr=False)
+    """Why the record cannot be used (the one-line message strict reading raises); only with
+    ``read_dyr(..., strict=False)``. ``params`` then holds NaN for the unreadable constants
+    (or is empty when their number is wrong)."""
 
     @property
     def kind(self) -> str:
@@ -124,6 +165,9 @@ class DyrData:
     records: list[DyrRecord]
     empty_records: int = 0
     """Records with no content (a lone ``/``), skipped."""
+    problems: list[str] = field(default_factory=list)
+    """Records dropped because they cannot be attributed to a machine (no readable bus number,
+    fewer than three fields): one line each; only with ``read_dyr(..., strict=False)``."""
 
     @property
     def counts(self) -> Counter:
@@ -154,6 +198,11 @@ class DyrData:
             raise hits[1].error(f"a second {kind} record for this machine "
                                 f"(first {hits[0].model} at line {hits[0].line})")
         return hits[0] if hits else None
+
+    def unit_records(self, bus: int, machine_id: str) -> list[DyrRecord]:
+        """Every record of one machine (any model, duplicates too), in file order."""
+        mid = str(machine_id).strip().upper()
+        return [r for r in self.records if r.bus == int(bus) and r.id.upper() == mid]
 
     def machine(self, bus: int, machine_id: str) -> DyrRecord | None:
         """The machine record (GENCLS/GENSAL/GENROU/GENTPJ) of a generator, or None."""
@@ -197,21 +246,35 @@ def _unquote(token: str) -> str:
     return token[1:-1].strip() if token[:1] in "'\"" else token.strip()
 
 
-def read_dyr(path) -> DyrData:
+def read_dyr(path, *, strict: bool = True) -> DyrData:
     """Read a PSS/E .dyr file: every record with its 1-based starting line.
 
     Typed models (:data:`TYPED_MODELS`) get named ``params`` and are checked: a wrong number
     of constants or a non-numeric constant raises :class:`InputError`. Other models
     are kept raw (see :attr:`DyrData.unknown_models`). A record left open at the end of the
-    file is an error too.
+    file is an error too. With ``strict=False`` these records are kept with their
+    ``problem`` instead (see the module docstring); a missing file is still an error.
     """
     path = Path(path)
     if not path.exists():
         raise InputError(path, "file does not exist")
     source = str(path)
-    records, empty = [], 0
+    records, empty, problems = [], 0, []
     tokens: list[str] = []
-    start = 0
+    start, broken = 0, None
+
+    def close(problem):
+        try:
+            rec = _dyr_record(tokens, source, start, strict)
+        except InputError as e:
+            if strict:
+                raise
+            problems.append(str(e))
+            return
+        if problem is not None and rec.problem is None:
+            rec = replace(rec, problem=problem)
+        records.append(rec)
+
     with open(path, encoding="latin-1") as f:
         for number, text in enumerate(f, start=1):
             if text.lstrip().startswith("@!"):
@@ -219,23 +282,29 @@ def read_dyr(path) -> DyrData:
             try:
                 toks, ended = _tokens(text)
             except ValueError as e:
-                raise InputError(source, str(e), row=number) from None
+                if strict:
+                    raise InputError(source, str(e), row=number) from None
+                broken = broken or str(InputError(source, str(e), row=number))
+                toks, ended = _tokens(text.replace("'", " ").replace('"', " "))
             if toks and not tokens:
                 start = number
             tokens.extend(toks)
             if ended:
                 if tokens:
-                    records.append(_dyr_record(tokens, source, start))
+                    close(broken)
                 else:
                     empty += 1
-                tokens = []
+                tokens, broken = [], None
     if tokens:
-        raise InputError(source, f"record {' '.join(tokens[:2])} ... has no terminating '/' "
-                            "before the end of the file", row=start)
-    return DyrData(source=source, records=records, empty_records=empty)
+        err = InputError(source, f"record {' '.join(tokens[:2])} ... has no terminating '/' "
+                         "before the end of the file", row=start)
+        if strict:
+            raise err
+        close(broken or str(err))
+    return DyrData(source=source, records=records, empty_records=empty, problems=problems)
 
 
-def _dyr_record(tokens: list[str], source: str, line: int) -> DyrRecord:
+def _dyr_record(tokens: list[str], source: str, line: int, strict: bool = True) -> DyrRecord:
     if len(tokens) < 3:
         raise InputError(source, f"record {' '.join(tokens)!r} needs a bus number, a model "
                             "name and a machine ID", row=line)
@@ -244,9 +313,18 @@ def _dyr_record(tokens: list[str], source: str, line: int) -> DyrRecord:
         bus = int(parse_number(bus_tok))
         if bus != parse_number(bus_tok):
             raise ValueError
-    except ValueError:
+    except (ValueError, OverflowError):
         raise InputError(source, f"record for model {model}: the bus number is "
                             f"{bus_tok!r}, not an integer", row=line) from None
+    problem = None
+
+    def bad(message):
+        nonlocal problem
+        err = InputError(source, f"{model} bus {bus} id {mid!r}{message}", row=line)
+        if strict:
+            raise err
+        problem = problem or str(err)
+
     values = []
     for k, tok in enumerate(tokens[3:]):
         if tok[:1] in "'\"":
@@ -258,8 +336,7 @@ def _dyr_record(tokens: list[str], source: str, line: int) -> DyrRecord:
             if model in TYPED_MODELS:
                 names = TYPED_MODELS[model]
                 name = names[k] if k < len(names) else f"#{k + 1}"
-                raise InputError(source, f"{model} bus {bus} id {mid!r}: constant {k + 1} "
-                                    f"({name}) is not a number: {tok!r}", row=line) from None
+                bad(f": constant {k + 1} ({name}) is not a number: {tok!r}")
             values.append(tok)
     params = {}
     if model in TYPED_MODELS:
@@ -267,16 +344,17 @@ def _dyr_record(tokens: list[str], source: str, line: int) -> DyrRecord:
         n_min = len(names) - OPTIONAL_TRAILING.get(model, 0)
         if not n_min <= len(values) <= len(names):
             want = f"{len(names)}" if n_min == len(names) else f"{n_min} or {len(names)}"
-            raise InputError(source, f"{model} bus {bus} id {mid!r} has {len(values)} "
-                                f"constants, expected {want} ({', '.join(names)})", row=line)
+            bad(f" has {len(values)} constants, expected {want} ({', '.join(names)})")
+            return DyrRecord(model=model, bus=bus, id=mid, constants=tuple(values), line=line,
+                             source=source, problem=problem)
         for k, name in enumerate(names):
             value = values[k] if k < len(values) else 0.0
             if isinstance(value, str):
-                raise InputError(source, f"{model} bus {bus} id {mid!r}: constant {k + 1} "
-                                    f"({name}) is not a number: {value!r}", row=line)
+                bad(f": constant {k + 1} ({name}) is not a number: {value!r}")
+                value = math.nan
             params[name] = value
     return DyrRecord(model=model, bus=bus, id=mid, constants=tuple(values), line=line,
-                     source=source, params=params)
+                     source=source, params=params, problem=problem)
 
 
 # --- .raw records -----------------------------------------------------------------------------
@@ -293,6 +371,8 @@ class RawBus:
     vm_pu: float
     va_deg: float
     line: int
+    problem: str | None = field(default=None, repr=False)
+    """Why the record cannot be used (``read_raw(..., strict=False)`` only; NaN fields)."""
 
 
 @dataclass(frozen=True)
@@ -341,6 +421,8 @@ class RawGenerator:
     pb_mw: float
     line: int
     source: str = field(default="", repr=False)
+    problem: str | None = field(default=None, repr=False)
+    """Why the record cannot be used (``read_raw(..., strict=False)`` only; NaN fields)."""
 
 
 @dataclass(frozen=True)
@@ -408,13 +490,17 @@ class RawCase:
     """Two-winding transformers."""
     n_three_winding: int = 0
     """Three-winding transformers skipped (five lines each)."""
+    problems: list[str] = field(default_factory=list)
+    """Records dropped or not used (``read_raw(..., strict=False)``): one line each."""
 
     def bus_kv(self, bus: int) -> float:
         """Base voltage [kV] of a bus; InputError for an unknown bus or a zero base."""
         b = self.buses.get(int(bus))
         if b is None:
             raise InputError(self.source, f"bus {bus} is not in the bus data")
-        if not b.base_kv > 0:
+        if b.problem is not None:
+            raise InputError(self.source, f"bus {bus}: {b.problem}", row=b.line)
+        if not (b.base_kv > 0 and math.isfinite(b.base_kv)):
             raise InputError(self.source, f"bus {bus} ({b.name}) has base voltage "
                                 f"{b.base_kv} kV; it must be > 0", row=b.line)
         return b.base_kv
@@ -504,35 +590,42 @@ _REQUIRED = object()
 class _Row:
     """Typed access to one record's fields with PSS/E defaults and one-line errors."""
 
-    def __init__(self, fields, source, line, what):
+    def __init__(self, fields, source, line, what, lenient=False):
         self.fields, self.source, self.line, self.what = fields, source, line, what
+        self.lenient, self.problem = lenient, None
+
+    def _fail(self, message, fallback):
+        """Raise the one-line error; leniently, note the first one and go on with ``fallback``."""
+        err = InputError(self.source, f"{self.what}: {message}", row=self.line)
+        if not self.lenient:
+            raise err
+        self.problem = self.problem or str(err)
+        return fallback
 
     def _raw(self, k, name, default):
         tok = self.fields[k] if k < len(self.fields) else None
         if tok is None:
             if default is _REQUIRED:
-                raise InputError(self.source, f"{self.what}: field {k + 1} ({name}) is missing",
-                                    row=self.line)
+                self._fail(f"field {k + 1} ({name}) is missing", None)
             return None
         return tok
 
     def num(self, k, name, default=_REQUIRED) -> float:
         tok = self._raw(k, name, default)
         if tok is None:
-            return default
+            return math.nan if default is _REQUIRED else default
         try:
             return parse_number(_unquote(tok))
         except ValueError:
-            raise InputError(self.source, f"{self.what}: field {k + 1} ({name}) is not a "
-                                f"number: {tok!r}", row=self.line) from None
+            return self._fail(f"field {k + 1} ({name}) is not a number: {tok!r}", math.nan)
 
     def int(self, k, name, default=_REQUIRED) -> int:
         value = self.num(k, name, default)
-        if value is None:
-            return None
-        if value != int(value):
-            raise InputError(self.source, f"{self.what}: field {k + 1} ({name}) is not an "
-                                f"integer: {value!r}", row=self.line)
+        fallback = None if default is _REQUIRED else default
+        if value is None or (self.lenient and not math.isfinite(value)):
+            return fallback
+        if not math.isfinite(value) or value != int(value):
+            return self._fail(f"field {k + 1} ({name}) is not an integer: {value!r}", fallback)
         return int(value)
 
     def text(self, k, name, default=_REQUIRED) -> str:
@@ -540,10 +633,13 @@ class _Row:
         return default if tok is None else _unquote(tok)
 
 
-def read_raw(path) -> RawCase:
+def read_raw(path, *, strict: bool = True) -> RawCase:
     """Read a PSS/E .raw file of revision 32 or 33 (other revisions: InputError).
 
-    BASFRQ defaults to 60 Hz when the case line omits it (or gives 0).
+    BASFRQ defaults to 60 Hz when the case line omits it (or gives 0). With ``strict=False``
+    a bus or generator record with an unreadable field is kept with its ``problem`` (NaN in
+    that field), a bus defined twice keeps its first record, and a record without a readable
+    bus number is dropped; each is listed in :attr:`RawCase.problems`.
     """
     path = Path(path)
     if not path.exists():
@@ -576,15 +672,25 @@ def read_raw(path) -> RawCase:
     title = (lines[1][1], lines[2][1])
 
     sections = _raw_sections(lines[3:], source)
-    buses = {}
+    buses, problems = {}, []
     for line, flds in _section(sections, 0):
-        r = _Row(flds, source, line, "bus record")
+        r = _Row(flds, source, line, "bus record", lenient=not strict)
         b = RawBus(number=r.int(0, "I"), name=r.text(1, "NAME", ""), base_kv=r.num(2, "BASKV", 0.0),
                    ide=r.int(3, "IDE", 1), area=r.int(4, "AREA", 1), zone=r.int(5, "ZONE", 1),
-                   vm_pu=r.num(7, "VM", 1.0), va_deg=r.num(8, "VA", 0.0), line=line)
+                   vm_pu=r.num(7, "VM", 1.0), va_deg=r.num(8, "VA", 0.0), line=line,
+                   problem=r.problem)
+        if b.number is None:
+            problems.append(f"{r.problem} (record dropped)")
+            continue
         if b.number in buses:
-            raise InputError(source, f"bus {b.number} is defined twice (first at line "
-                                f"{buses[b.number].line})", row=line)
+            err = InputError(source, f"bus {b.number} is defined twice (first at line "
+                             f"{buses[b.number].line})", row=line)
+            if strict:
+                raise err
+            problems.append(f"{err} (the first is used)")
+            continue
+        if b.problem:
+            problems.append(b.problem)
         buses[b.number] = b
     loads = []
     for line, flds in _section(sections, 1):
@@ -596,15 +702,21 @@ def read_raw(path) -> RawCase:
                              yp_mw=r.num(9, "YP", 0.0), yq_mvar=r.num(10, "YQ", 0.0), line=line))
     generators = []
     for line, flds in _section(sections, 3):
-        r = _Row(flds, source, line, "generator record")
-        generators.append(RawGenerator(
+        r = _Row(flds, source, line, "generator record", lenient=not strict)
+        g = RawGenerator(
             bus=r.int(0, "I"), id=r.text(1, "ID", "1"), pg_mw=r.num(2, "PG", 0.0),
             qg_mvar=r.num(3, "QG", 0.0), qt_mvar=r.num(4, "QT", 9999.0), qb_mvar=r.num(5, "QB", -9999.0),
             vs_pu=r.num(6, "VS", 1.0), ireg=r.int(7, "IREG", 0), mbase_mva=r.num(8, "MBASE", sbase),
             zr_pu=r.num(9, "ZR", 0.0), zx_pu=r.num(10, "ZX", 1.0), rt_pu=r.num(11, "RT", 0.0),
             xt_pu=r.num(12, "XT", 0.0), gtap=r.num(13, "GTAP", 1.0), stat=r.int(14, "STAT", 1),
             rmpct=r.num(15, "RMPCT", 100.0), pt_mw=r.num(16, "PT", 9999.0), pb_mw=r.num(17, "PB", -9999.0),
-            line=line, source=source))
+            line=line, source=source, problem=r.problem)
+        if g.bus is None:
+            problems.append(f"{r.problem} (record dropped)")
+            continue
+        if g.problem:
+            problems.append(g.problem)
+        generators.append(g)
     branches = []
     for line, flds in _section(sections, 4):
         r = _Row(flds, source, line, "branch record")
@@ -615,7 +727,7 @@ def read_raw(path) -> RawCase:
     transformers, n3 = _read_transformers(_section(sections, 5), source, sbase)
     return RawCase(source=source, revision=rev, sbase_mva=sbase, basfrq_hz=basfrq, ic=ic, title=title,
                    buses=buses, loads=loads, generators=generators, branches=branches,
-                   transformers=transformers, n_three_winding=n3)
+                   transformers=transformers, n_three_winding=n3, problems=problems)
 
 
 _SECTION_NAMES = ("bus", "load", "fixed shunt", "generator", "branch", "transformer")
@@ -764,6 +876,91 @@ def transient_data(gen_dyr_record: DyrRecord) -> MachineTransientData | None:
                                 td02_s=p["T''do"], tq02_s=p["T''qo"], xl_pu=p["Xl"])
 
 
+def _g(x) -> str:
+    return f"{x:g}" if isinstance(x, (int, float)) else repr(x)
+
+
+def record_label(record: DyrRecord) -> str:
+    """``GENROU on bus 3 id '1' (case.dyr line 7)``: a record, for one-line messages."""
+    return (f"{record.model} on bus {record.bus} id {record.id!r} "
+            f"({Path(record.source).name or '.dyr'} line {record.line})")
+
+
+def generator_label(generator: RawGenerator) -> str:
+    """``generator on bus 3 id '1' (case.raw line 11)``."""
+    return (f"generator on bus {generator.bus} id {generator.id!r} "
+            f"({Path(generator.source).name or '.raw'} line {generator.line})")
+
+
+def machine_problems(record: DyrRecord, generator: RawGenerator) -> list[str]:
+    """What makes a machine record (GENCLS/GENSAL/GENROU/GENTPJ) and its .raw generator record
+    unusable for :func:`machine_kwargs` and :class:`jaxdse.Machine`: one line each, naming the
+    record and the values; empty when both are usable.
+
+    Checked: the records read (``problem``); finite values; H, T'do, Xd, Xq, X'd > 0 (GENCLS:
+    H > 0 and the ZSORCE reactance ZX > 0); D >= 0; X'd <= Xd; MBASE > 0; ZR >= 0. The q-axis
+    circuits are checked apart (:func:`q_axis_problems`): jaxdse can do without them.
+    """
+    out = []
+    g = generator
+    if record.kind != "machine":
+        return [f"{record_label(record)}: not a machine model ({', '.join(MACHINE_FIELDS)})"]
+    if record.problem:
+        out.append(record.problem)
+    else:
+        p = record.params
+        where = record_label(record)
+        positive = ("H",) if record.model == "GENCLS" else ("H", "T'do", "Xd", "Xq", "X'd")
+        for name in positive:
+            if not (math.isfinite(p[name]) and p[name] > 0):
+                out.append(f"{where}: {name} = {_g(p[name])} must be > 0")
+        if not (math.isfinite(p["D"]) and p["D"] >= 0):
+            out.append(f"{where}: D = {_g(p['D'])} must be >= 0")
+        if record.model != "GENCLS" and p["X'd"] > p["Xd"] > 0:
+            xd1, xd = p["X'd"], p["Xd"]
+            out.append(f"{where}: X'd = {_g(xd1)} above Xd = {_g(xd)}")
+    if g.problem:
+        out.append(g.problem)
+        return out
+    where = generator_label(g)
+    if not (math.isfinite(g.mbase_mva) and g.mbase_mva > 0):
+        out.append(f"{where}: MBASE = {_g(g.mbase_mva)} MVA must be > 0")
+    if not (math.isfinite(g.zr_pu) and g.zr_pu >= 0):
+        out.append(f"{where}: ZR (Ra) = {_g(g.zr_pu)} must be >= 0")
+    if record.model == "GENCLS" and not (math.isfinite(g.zx_pu) and g.zx_pu > 0):
+        out.append(f"{where}: ZX (X'd of GENCLS) = {_g(g.zx_pu)} must be > 0")
+    return out
+
+
+def q_axis_problems(record: DyrRecord) -> list[str]:
+    """Why the q-axis circuits of a GENROU/GENTPJ record cannot be used by
+    :class:`jaxdse.QAxisCircuits` (X''q = X''d must lie in (Xl, X'q], X'q <= Xq, Xl >= 0, T'qo
+    and T''qo > 0, all finite): one line each, naming the record and the values; empty when usable
+    (and for models without these circuits)."""
+    if record.model not in ("GENROU", "GENTPJ") or record.problem:
+        return []
+    p, where, out = record.params, record_label(record), []
+    names = ("X'q", "X''d", "Xl", "T'qo", "T''qo")
+    bad = [n for n in names if not math.isfinite(p[n])]
+    if bad:
+        return [f"{where}: {', '.join(f'{n} = {_g(p[n])}' for n in bad)} not finite"]
+    for name in ("T'qo", "T''qo", "X'q"):
+        if not p[name] > 0:
+            out.append(f"{where}: {name} = {_g(p[name])} must be > 0")
+    if p["Xl"] < 0:
+        out.append(f"{where}: Xl = {_g(p['Xl'])} must be >= 0")
+    xd2, xq1, xl = p["X''d"], p["X'q"], p["Xl"]
+    if xd2 < xl:
+        out.append(f"{where}: X''d = {_g(xd2)} below Xl = {_g(xl)}")
+    elif xd2 == xl:
+        out.append(f"{where}: X''d = {_g(xd2)} not above Xl = {_g(xl)}")
+    if xd2 > xq1 > 0:
+        out.append(f"{where}: X''d (= X''q) = {_g(xd2)} above X'q = {_g(xq1)}")
+    if xq1 > p["Xq"] > 0:
+        out.append(f"{where}: X'q = {_g(xq1)} above Xq = {_g(p['Xq'])}")
+    return out
+
+
 def transformer_sides(raw_transformer: RawTransformer, raw_case: RawCase) -> tuple[int, int]:
     """(HV bus, LV bus): the end with the higher bus base voltage is HV (winding 1 on a tie)."""
     t = raw_transformer
@@ -885,42 +1082,22 @@ def governor_from_dyr(record: DyrRecord, *, mbase_mva: float | None = None) -> A
     on the Trate base: ``base_ratio`` = Trate/MBASE). Invalid parameters (e.g. a zero time
     constant PSS/E does not allow) raise :class:`InputError` naming the record.
     """
+    model = GOVERNORS.get(record.model)
+    if model is None:
+        raise record.error(f"is not a supported governor model ({', '.join(GOVERNORS)})")
     p = record.params
+    kwargs = {f: p[name] for f, name in GOVERNOR_PARAMETERS[record.model].items()}
     try:
-        if record.model == "TGOV1":
-            return TGOV1(r_pu=p["R"], t1_s=p["T1"], v_max_pu=p["VMAX"], v_min_pu=p["VMIN"],
-                            t2_s=p["T2"], t3_s=p["T3"], dt_pu=p["Dt"])
-        if record.model == "IEEEG1":
-            return IEEEG1(k=p["K"], t1_s=p["T1"], t2_s=p["T2"], t3_s=p["T3"], uo_pu_s=p["Uo"],
-                          uc_pu_s=p["Uc"], p_max_pu=p["PMAX"], p_min_pu=p["PMIN"], t4_s=p["T4"],
-                          k1=p["K1"], k2=p["K2"], t5_s=p["T5"], k3=p["K3"], k4=p["K4"], t6_s=p["T6"],
-                          k5=p["K5"], k6=p["K6"], t7_s=p["T7"], k7=p["K7"], k8=p["K8"])
-        if record.model == "GAST":
-            return GAST(r_pu=p["R"], t1_s=p["T1"], t2_s=p["T2"], t3_s=p["T3"], at_pu=p["AT"],
-                        kt_pu=p["KT"], v_max_pu=p["VMAX"], v_min_pu=p["VMIN"], dturb_pu=p["DTURB"])
-        if record.model == "HYGOV":
-            return HYGOV(r_pu=p["R"], r_temp_pu=p["r"], tr_s=p["Tr"], tf_s=p["Tf"], tg_s=p["Tg"],
-                         velm_pu_s=p["VELM"], g_max_pu=p["GMAX"], g_min_pu=p["GMIN"], tw_s=p["TW"],
-                         at_pu=p["At"], dturb_pu=p["Dturb"], q_nl_pu=p["qNL"])
         if record.model == "GGOV1":
             ratio = 1.0
             if p["Trate"] > 0:
                 if mbase_mva is None or not mbase_mva > 0:
                     raise ValueError("Trate > 0 needs the machine's MBASE (mbase_mva=...)")
                 ratio = p["Trate"] / mbase_mva
-            return GGOV1(rselect=int(p["Rselect"]), flag=int(p["Flag"]), r_pu=p["R"],
-                         t_pelec_s=p["Tpelec"], maxerr_pu=p["maxerr"], minerr_pu=p["minerr"],
-                         kpgov=p["Kpgov"], kigov=p["Kigov"], kdgov=p["Kdgov"], t_dgov_s=p["Tdgov"],
-                         v_max_pu=p["Vmax"], v_min_pu=p["Vmin"], t_act_s=p["Tact"], k_turb=p["Kturb"],
-                         w_fnl_pu=p["Wfnl"], t_b_s=p["Tb"], t_c_s=p["Tc"], t_eng_s=p["Teng"],
-                         t_fload_s=p["Tfload"], kpload=p["Kpload"], kiload=p["Kiload"],
-                         ldref_pu=p["Ldref"], dm_pu=p["Dm"], r_open_pu_s=p["Ropen"],
-                         r_close_pu_s=p["Rclose"], kimw=p["Kimw"], aset_pu_s=p["Aset"], ka=p["Ka"],
-                         t_a_s=p["Ta"], trate_mw=p["Trate"], db_pu=p["db"], t_sa_s=p["Tsa"],
-                         t_sb_s=p["Tsb"], rup_pu_s=p["Rup"], rdown_pu_s=p["Rdown"], base_ratio=ratio)
+            kwargs.update(rselect=int(p["Rselect"]), flag=int(p["Flag"]), base_ratio=ratio)
+        return model(**kwargs)
     except ValueError as e:
         raise record.error(str(e)) from None
-    raise record.error(f"is not a supported governor model ({', '.join(GOVERNOR_FIELDS)})")
 
 
 def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
@@ -938,9 +1115,11 @@ def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
 
 
 __all__ = [
-    "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "GOVERNOR_FIELDS", "MACHINE_FIELDS",
-    "SUPPORTED_RAW_REVISIONS", "TYPED_MODELS", "DyrData", "DyrRecord", "MachineTransientData",
-    "RawBranch", "RawBus", "RawCase", "RawGenerator", "RawLoad", "RawTransformer",
-    "governor_from_dyr", "load_unit", "machine_kwargs", "parse_number", "read_dyr", "read_raw",
-    "transformer_kwargs", "transformer_sides", "transient_data",
+    "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "GOVERNOR_FIELDS", "GOVERNOR_PARAMETERS",
+    "MACHINE_FIELDS", "PSSE_GOVERNOR_MODELS", "SUPPORTED_RAW_REVISIONS", "TYPED_MODELS",
+    "DyrData", "DyrRecord",
+    "MachineTransientData", "RawBranch", "RawBus", "RawCase", "RawGenerator", "RawLoad",
+    "RawTransformer", "generator_label", "governor_from_dyr", "load_unit", "machine_kwargs",
+    "machine_problems", "parse_number", "q_axis_problems", "read_dyr", "read_raw",
+    "record_label", "transformer_kwargs", "transformer_sides", "transient_data",
 ]

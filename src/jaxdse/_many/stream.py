@@ -1,12 +1,16 @@
 """Long recordings in chunks: bounded memory, same results as one call.
 
 The recording stays on the host (NumPy, or a memory map); each chunk goes to the device
-with ``derivative_half_width`` samples of halo on each side, so that the smoothed
+with ``derivative_half_width`` samples (at least 1) of halo on each side, so that the smoothed
 derivatives equal those of the whole recording. What crosses a chunk boundary is carried:
 the observer state and the previous sample (to integrate across the boundary), the running
 mean of the auxiliary load and the unwrapping offsets (``StreamContext``), T_ref and the
 initial angle (from the first chunk), and the per-block summaries of ``keep="final"``.
 A second pass replays the event with the final a1, a2 when ``settings.playback``.
+
+Chunks start every ``chunk_s``; a last chunk too short for a slice of its own (a
+:class:`Recording` needs ``MIN_SLICE_SAMPLES``, halo included) joins the chunk before it, so
+any split works.
 """
 
 from __future__ import annotations
@@ -35,6 +39,19 @@ from .._core.recording import Recording, pad_end
 from .._core.result import Estimate, build_estimate
 from .._core.settings import Settings
 from .batch import pad_recording
+
+
+MIN_SLICE_SAMPLES = 8
+"""The fewest samples a slice (a chunk with its halo) may have: :class:`Recording`'s minimum."""
+
+
+def _chunk_bounds(total: int, chunk: int, halo: int) -> list[tuple[int, int]]:
+    """(start, end) of each chunk: every ``chunk`` samples, a short last chunk merged into the
+    one before it (its slice, ``halo`` samples before it included, would be too short)."""
+    starts = list(range(0, total, chunk))
+    if len(starts) > 1 and total - starts[-1] + halo < MIN_SLICE_SAMPLES:
+        starts.pop()
+    return [(s, e) for s, e in zip(starts, starts[1:] + [total])]
 
 
 def _slice(rec: Recording, a: int, b: int, size: int) -> Recording:
@@ -108,7 +125,8 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
 
     Arguments:
         recording: one recording; its arrays may be host NumPy arrays or memory maps.
-        chunk_s: chunk length [s], rounded to whole blocks; at least ``qss_window_s``.
+        chunk_s: chunk length [s], rounded to whole blocks; at least ``qss_window_s``. A last
+            chunk too short for a slice of its own joins the chunk before it.
         progress: called with (samples done, samples to do) after each chunk.
 
     Returns:
@@ -118,31 +136,36 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
         raise ValueError("estimate_stream keeps final values only: use Settings(keep='final')")
     ts = np.asarray(recording.t_s)
     total, dt = ts.shape[0], float(ts[1] - ts[0])
-    size_b, hw = settings.block_samples, settings.derivative_half_width
+    size_b = settings.block_samples
+    # Halo: the derivative window, and at least the one neighbour of a central difference
+    # (derivative_half_width = 0).
+    hw = max(settings.derivative_half_width, 1)
     chunk = max(1, round(chunk_s / dt / size_b)) * size_b
     if chunk * dt < settings.qss_window_s or chunk <= 2 * hw + 1:
         raise ValueError(f"chunk_s = {chunk_s} s is shorter than qss_window_s or the derivative window")
     t_m_all = external_torque(t_m, ts, settings)
-    starts = list(range(0, total, chunk))
+    bounds = _chunk_bounds(total, chunk, hw)
     work = total * (2 if settings.playback else 1)
 
     def pieces():
-        for s in starts:
-            e = min(s + chunk, total)
+        for s, e in bounds:
             a, b = max(s - hw, 0), min(e + hw, total)
             lead = s - a
-            size = chunk + lead + hw  # one shape for every chunk but the first
+            # Own samples, whole blocks: ``chunk`` for every chunk but a merged last one, so
+            # that all but the first and that one share one shape.
+            own = max(chunk, -(-(e - s) // size_b) * size_b)
+            size = own + lead + hw
             t_slice = None
             if t_m_all is not None:
                 t_slice = jnp.asarray(pad_end(np.asarray(t_m_all[a:b]), size))
-            yield s, e, a, lead, _slice(recording, a, b, size), t_slice
+            yield s, e, a, lead, own, _slice(recording, a, b, size), t_slice
 
     blocks, sums, contexts, carry, ok, done = [], [], [], None, True, 0
     ctx = None
-    for s, e, a, lead, rec, t_slice in pieces():
+    for s, e, a, lead, own, rec, t_slice in pieces():
         contexts.append(ctx)
         out, carry, chunk_ok, chunk_sums, ctx = _observer_chunk(
-            rec, plant, config, settings, ctx, carry, t_slice, lead, chunk, jnp.asarray(e - s),
+            rec, plant, config, settings, ctx, carry, t_slice, lead, own, jnp.asarray(e - s),
             jnp.asarray(max(e - hw - a, 0)))
         blocks.append(jtu.tree_map(np.asarray, out))
         sums.append(chunk_sums)
@@ -156,9 +179,9 @@ def estimate_stream(recording: Recording, plant: Plant, config: ObserverConfig,
     pb_blocks = None
     if settings.playback:
         pb, pb_carry = [], None
-        for (s, e, a, lead, rec, t_slice), c in zip(pieces(), contexts):
+        for (s, e, a, lead, own, rec, t_slice), c in zip(pieces(), contexts):
             out, pb_carry, chunk_ok = _playback_chunk(rec, plant, settings, c, pb_carry, t_slice,
-                                                      lead, chunk, jnp.asarray(e - s), last.theta,
+                                                      lead, own, jnp.asarray(e - s), last.theta,
                                                       t_ref, delta0)
             pb.append(jtu.tree_map(np.asarray, out))
             ok = ok & bool(chunk_ok)

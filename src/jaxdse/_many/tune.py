@@ -45,27 +45,13 @@ from .._core.estimate import estimate
 from .._core.plant import Plant
 from .._core.recording import Recording
 from .._core.settings import Settings
+from .._core.tuning import AUTODIFF_MODES, TUNABLE, LossWeights
 from .batch import batch_size, stack, stack_recordings
 
-TUNABLE = ("lambda1", "lambda2", "lambda3", "c1", "c2", "k_ext", "gamma1", "gamma2", "k_obs")
-"""Observer parameters that :func:`tune` adjusts by default (paper Table I)."""
-
-AUTODIFF_MODES = ("auto", "fwd", "bwd")
 FORWARD_MODE_MAX_RECORDINGS = 8
 """``autodiff="auto"`` uses forward mode up to this many training recordings."""
 
 TUNE_SETTINGS = Settings.fast()
-
-
-class LossWeights(eqx.Module):
-    """Weights of the three parts of :func:`tuning_loss` and the burn-in of the x2 part."""
-
-    x2: float = 1.0
-    playback: float = 1.0
-    parameter: float = 1.0
-    burn_in_s: float = 10.0
-    band: float = 0.01
-    """Band of the parameter part (relative): half the 2 % convergence band, for margin."""
 
 
 def to_log(config: ObserverConfig, start: ObserverConfig | None = None, names: Sequence[str] = TUNABLE,

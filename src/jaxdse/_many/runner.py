@@ -1,0 +1,135 @@
+"""The one runner: many units (generators, recording segments, fleet plants) assessed at once.
+
+Units are grouped by what one compiled function can share: a padded length (a few sizes per
+octave), a PMU location and a plant structure. Each group is padded, stacked on the host,
+and run through ``jit(vmap(assess))`` in chunks of a bounded size (memory: the bootstrap
+holds ``bootstrap_draws`` front ends per unit); the results come back to the host once per
+chunk and are cut to each unit's own length and shifted to its own start time. ``jaxdse
+run``, ``jaxdse fleet`` and ``jaxdse demo`` all call :func:`assess_units`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import equinox as eqx
+import jax
+import jax.tree_util as jtu
+import numpy as np
+
+from .._core.assess import Assessment, assess
+from .._core.drem import ObserverConfig
+from .._core.identify import IdentifySettings
+from .._core.plant import Plant
+from .._core.recording import Recording
+from .._core.settings import Settings
+from .._core.verdict import VerdictSettings
+from .batch import pad_recording, stack
+
+BUCKETS_PER_OCTAVE = 4
+"""Recording lengths are padded up to one of 4 sizes per doubling (at most 19 % padding), so
+that the units of a run share a few compiled shapes."""
+CHUNK_BYTES = 1.5 * 2**30
+"""Working memory [B] that one chunk of a group may take; sets the units per compiled call."""
+BYTES_PER_SAMPLE = 8 * 80
+"""Bytes per sample per front end held at once (~80 float64 arrays, measured on the bootstrap)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Unit:
+    """One unit of work: a recording (segment) of one generator and its plant."""
+
+    name: str
+    recording: Recording
+    plant: Plant
+    t0_s: float = 0.0
+    """Start time of the segment in the source file [s]; the results' time axes are shifted by it."""
+    a2_reference: float | None = None
+    """Known a2 [rad/s^2 per pu] (simulations), for the online estimate's convergence time."""
+
+
+def bucket(n: int, minimum: int = 256) -> int:
+    """The padded length for ``n`` samples: the next of 4 sizes per octave (>= ``minimum``)."""
+    size = max(n, minimum)
+    octave = 1 << (size - 1).bit_length() - 1
+    for k in range(BUCKETS_PER_OCTAVE, 2 * BUCKETS_PER_OCTAVE + 1):
+        if size <= octave * k // BUCKETS_PER_OCTAVE:
+            return octave * k // BUCKETS_PER_OCTAVE
+    return 2 * octave
+
+
+def group_units(units: Sequence[Unit], size: int | None = None) -> dict[tuple, list[int]]:
+    """Indices of ``units`` by (padded length, PMU location, plant structure); ``size`` pads
+    every unit to one length instead (one compilation for a fleet)."""
+    groups: dict = {}
+    for k, u in enumerate(units):
+        n = int(np.shape(u.recording.t_s)[0])
+        key = (size or bucket(n), u.recording.location, jtu.tree_structure(u.plant))
+        groups.setdefault(key, []).append(k)
+    return groups
+
+
+def units_per_call(samples: int, identify_settings: IdentifySettings | None, units: int) -> int:
+    """Units per compiled call of a group: as many as ``CHUNK_BYTES`` holds, at most ``units``."""
+    fronts = 2 + (identify_settings.bootstrap_draws if identify_settings is not None else 0)
+    return int(max(1, min(units, CHUNK_BYTES // (samples * fronts * BYTES_PER_SAMPLE))))
+
+
+@eqx.filter_jit
+def _assess_chunk(recs, plants, refs, config, settings, identify_settings, verdict_settings):
+    return jax.vmap(lambda r, p, a: assess(r, p, config, settings, identify_settings, verdict_settings, a))(
+        recs, plants, refs)
+
+
+def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(),
+                 settings: Settings = Settings(),
+                 identify_settings: IdentifySettings | None = IdentifySettings(),
+                 verdict_settings: VerdictSettings = VerdictSettings(), *, size: int | None = None,
+                 chunk: int | None = None,
+                 progress: Callable[[str], None] | None = None) -> list[Assessment]:
+    """:func:`jaxdse.assess` every unit, vmapped within groups; one :class:`Assessment` per
+    unit, in order, with host (NumPy) arrays cut to the unit's length and time-shifted.
+
+    Arguments:
+        units: the units; each has its own recording and plant.
+        config, settings, identify_settings, verdict_settings: shared by all units
+            (``identify_settings=None``: the online estimate and its playback only).
+        size: pad every recording to this many samples (default: per-group buckets).
+        chunk: units per compiled call (default: what ``CHUNK_BYTES`` holds).
+        progress: called with a line after each compiled call.
+    """
+    out: list = [None] * len(units)
+    for (length, _, _), members in group_units(units, size).items():
+        recs = stack([pad_recording(units[k].recording, length, with_frequency=True) for k in members])
+        plants = stack([units[k].plant for k in members])
+        refs = np.array([np.nan if units[k].a2_reference is None else units[k].a2_reference
+                         for k in members])
+        step = chunk or units_per_call(length, identify_settings, len(members))
+        for start in range(0, len(members), step):
+            # A short last chunk repeats its last member: one compiled shape per group.
+            idx = np.minimum(np.arange(start, start + step), len(members) - 1)
+            res = _assess_chunk(*(jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in (recs, plants, refs)),
+                                config, settings, identify_settings, verdict_settings)
+            res = jax.device_get(res)
+            for j in range(min(step, len(members) - start)):
+                u = units[members[start + j]]
+                out[members[start + j]] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
+                                                     int(np.shape(u.recording.t_s)[0]), u.t0_s)
+            if progress is not None:
+                progress(f"{min(start + step, len(members))}/{len(members)} unit(s) of {length} samples")
+    return out
+
+
+def _cut_shift(a: Assessment, n: int, t0: float) -> Assessment:
+    """``a`` with every per-sample array cut to the first ``n`` samples and the estimate's
+    time axis shifted by ``t0`` [s]."""
+    def cut(x):
+        return x[:n] if np.ndim(x) >= 1 and np.shape(x)[0] >= n and np.shape(x)[0] > 4 else x
+
+    est = jtu.tree_map(cut, a.estimate)
+    est = eqx.tree_at(lambda e: e.time_s, est, est.time_s + t0)
+    rep = a.replay
+    if rep is not None:
+        rep = eqx.tree_at(lambda r: r.playback, rep, jtu.tree_map(cut, rep.playback))
+    return dataclasses.replace(a, estimate=est, replay=rep)
