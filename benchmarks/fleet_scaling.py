@@ -118,6 +118,34 @@ def main() -> None:
     doc["fleet_scaling"] = res
     doc["fleet_scaling_machine"] = f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores"
     path.write_text(json.dumps(doc, indent=2) + "\n")
+    plot(res, HERE / "fleet_scaling.png")
+
+
+def plot(res: dict, path: Path) -> None:
+    """Wall time and per-unit cost against the number of units (log-log)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = np.array([v["units"] for v in res.values()])
+    wall = np.array([v["wall_s"] for v in res.values()])
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3.4))
+    ax[0].loglog(n, wall, "o-")
+    ax[0].set_xlabel("units in the fleet")
+    ax[0].set_ylabel("wall time incl. compile [s]")
+    ax[0].axhline(120.0, color="grey", ls=":", label="120 s")
+    ax[0].legend()
+    ax[1].loglog(n, wall / n, "o-", color="tab:green")
+    ax[1].set_xlabel("units in the fleet")
+    ax[1].set_ylabel("wall time per unit [s]")
+    fig.suptitle(f"jd.assess_units, {DURATION_S:.0f} s at {FRAME_RATE_HZ:.0f} frames/s per unit (ANDES bench "
+                 "windows, perturbed plants)", fontsize=9)
+    for a in ax:
+        a.grid(True, which="both", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

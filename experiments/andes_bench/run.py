@@ -90,13 +90,6 @@ def noisy(t, v, i, f, seed: int) -> jd.Recording:
 SETTINGS = jd.Settings(playback=False, keep="final")
 
 
-def unit(rec: jd.Recording, p: jd.Plant):
-    """The default pipeline of ``jaxdse run`` for one unit (``jd.assess``)."""
-    a = jd.assess(rec, p, jd.ObserverConfig(), SETTINGS)
-    return a.estimate.h_s, a.estimate.converged, a.identified, a.replay.smape.i_t, a.verdict
-
-
-_unit = jax.jit(unit)
 _draws = jax.jit(jax.vmap(lambda rec, p: jd.identify(rec, p).h_ci95, in_axes=(0, None)))
 
 
@@ -107,7 +100,7 @@ def main():
                     help="machines per case in the calibration (the first ones in tag order; 0: all)")
     args = ap.parse_args()
     t_start = time.perf_counter()
-    rows, calibration = [], []
+    rows, calibration, units, meta = [], [], [], []
     for case in CASES:
         truth = json.loads((DATA / case / "truth.json").read_text())
         f0 = truth["f0_hz"]
@@ -117,24 +110,8 @@ def main():
             for tag, (v, i, f) in phasors.items():
                 m = machines[tag]
                 rec = noisy(t, v, i, f, seed=zlib.crc32(f"{case}/{sc}/{tag}".encode()))
-                h_drem, conv, ident, smape_i, verdict = jax.tree_util.tree_map(
-                    np.asarray, _unit(rec, plant(m, f0)))
-                word, reasons = jd.describe(verdict)
-                h_true = m["H_s_mbase"]
-                lo, hi = (float(x) for x in ident.h_ci95)
-                rows.append({
-                    "case": case, "scenario": sc, "machine": tag, "governor": m["governor"]["model"],
-                    "H_true_s": h_true, "H_s": float(ident.h_s), "H_ci95": [lo, hi],
-                    "H_error_percent": 100 * (float(ident.h_s) / h_true - 1),
-                    "covers": bool(lo <= h_true <= hi), "verdict": word, "reasons": reasons,
-                    "relative_ci_percent": 100 * float(ident.relative_ci),
-                    "filter_spread_percent": 100 * float(ident.filter_spread),
-                    "governor_gain_error": float(ident.governor_gain_error),
-                    "H_drem_s": float(h_drem), "drem_converged": bool(conv),
-                    "replay_smape_I_t_percent": float(smape_i)})
-                r = rows[-1]
-                print(f"[bench] {case} {sc} {tag}: H {r['H_s']:.3f} ({lo:.3f}-{hi:.3f}) true {h_true:.3f} "
-                      f"({r['H_error_percent']:+.1f} %) {word}", file=sys.stderr, flush=True)
+                units.append(jd.Unit(f"{case}/{sc}/{tag}", rec, plant(m, f0)))
+                meta.append((case, sc, tag, m))
             if sc == CALIBRATION_SCENARIO and args.draws:
                 chosen = list(phasors.items())[:args.calibration_machines or None]
                 for k, (tag, (v, i, f)) in enumerate(chosen):
@@ -147,6 +124,28 @@ def main():
                                         "covered": int(np.sum((ci[:, 0] <= h_true) & (h_true <= ci[:, 1])))})
                     print(f"[bench] calibration {case} {tag}: {calibration[-1]['covered']}/{args.draws}",
                           file=sys.stderr, flush=True)
+    # Every machine-recording in one call of the runner (vmapped within groups of one length
+    # and one plant structure), as `jaxdse run` and `jaxdse fleet` do.
+    assessed = jd.assess_units(units, jd.ObserverConfig(), SETTINGS,
+                               progress=lambda line: print(f"[bench] {line}", file=sys.stderr, flush=True))
+    for (case, sc, tag, m), a in zip(meta, assessed):
+        ident = a.identified
+        word, reasons = jd.describe(a.verdict)
+        h_true = m["H_s_mbase"]
+        lo, hi = (float(x) for x in ident.h_ci95)
+        rows.append({
+            "case": case, "scenario": sc, "machine": tag, "governor": m["governor"]["model"],
+            "H_true_s": h_true, "H_s": float(ident.h_s), "H_ci95": [lo, hi],
+            "H_error_percent": 100 * (float(ident.h_s) / h_true - 1),
+            "covers": bool(lo <= h_true <= hi), "verdict": word, "reasons": reasons,
+            "relative_ci_percent": 100 * float(ident.relative_ci),
+            "filter_spread_percent": 100 * float(ident.filter_spread),
+            "governor_gain_error": float(ident.governor_gain_error),
+            "H_drem_s": float(a.estimate.h_s), "drem_converged": bool(a.estimate.converged),
+            "replay_smape_I_t_percent": float(a.replay.smape.i_t)})
+        r = rows[-1]
+        print(f"[bench] {case} {sc} {tag}: H {r['H_s']:.3f} ({lo:.3f}-{hi:.3f}) true {h_true:.3f} "
+              f"({r['H_error_percent']:+.1f} %) {word}", file=sys.stderr, flush=True)
     results = summarise(rows, calibration)
     results["wall_s"] = time.perf_counter() - t_start
     (HERE / "results.json").write_text(json.dumps(results, indent=2) + "\n")
@@ -175,9 +174,31 @@ def summarise(rows, calibration) -> dict:
         "false_identified": sum(r["verdict"] == "identified" and abs(r["H_error_percent"]) > 10
                                 for r in rows),
         "verdicts": {v: sum(r["verdict"] == v for r in rows) for v in jd.VERDICTS},
+        "sharpness": sharpness(rows),
+        "verdict_calibration": verdict_calibration(rows),
         "calibration": calibration,
         "units": rows,
     }
+
+
+def sharpness(rows) -> dict:
+    """Of the units within 5 % of the truth, the share that is `identified` (events, all)."""
+    out = {}
+    for label, sel in (("events", [r for r in rows if r["scenario"] in EVENTS]), ("all", rows)):
+        good = [r for r in sel if abs(r["H_error_percent"]) <= 5]
+        out[label] = {"within_5pct": len(good), "identified": sum(r["verdict"] == "identified" for r in good),
+                      "share": (sum(r["verdict"] == "identified" for r in good) / len(good)) if good else None}
+    return out
+
+
+def verdict_calibration(rows) -> dict:
+    """For each verdict of H: how many units, and the share within 5 % and within 10 % of the truth."""
+    out = {}
+    for v in jd.VERDICTS:
+        sel = [abs(r["H_error_percent"]) for r in rows if r["verdict"] == v]
+        out[v] = {"units": len(sel), "within_5pct": float(np.mean([e <= 5 for e in sel])) if sel else None,
+                  "within_10pct": float(np.mean([e <= 10 for e in sel])) if sel else None}
+    return out
 
 
 def report(res: dict) -> str:
@@ -198,6 +219,18 @@ def report(res: dict) -> str:
         f"machines)." if res["ci95_coverage"] is not None else "- Calibration: not run.",
         f"- False confidence: {res['false_identified']} units `identified` with |H error| > 10 %.",
         "- Verdicts: " + ", ".join(f"{k} {v}" for k, v in res["verdicts"].items()) + ".",
+        f"- Sharpness: of the event recordings within 5 % of the truth, "
+        f"{res['sharpness']['events']['identified']} of {res['sharpness']['events']['within_5pct']} are "
+        f"`identified`; of all recordings, {res['sharpness']['all']['identified']} of "
+        f"{res['sharpness']['all']['within_5pct']}.",
+        "",
+        "Calibration of the verdict of H (all recordings):",
+        "",
+        "| verdict of H | units | within 5 % | within 10 % |",
+        "|---|---|---|---|",
+        *[f"| {v} | {c['units']} | " + ("" if c["within_5pct"] is None else f"{100 * c['within_5pct']:.0f} %")
+          + " | " + ("" if c["within_10pct"] is None else f"{100 * c['within_10pct']:.0f} %") + " |"
+          for v, c in res["verdict_calibration"].items()],
         "",
         "| case | recording | machine | governor | H true [s] | H [s] | 95 % interval [s] | error [%] | "
         "verdict | DREM H [s] | replay sMAPE I_t [%] |",

@@ -33,8 +33,11 @@ def main():
     t0 = time.perf_counter()
     units = jd.fleet(HERE / "fleet.toml", HERE / "report", stream=sys.stderr)
     keep = ("name", "bus", "s_mva", "H_s", "H_ci95", "H_reference_s", "H_error_percent", "D", "verdict",
-            "reasons", "interval", "playback_smape_percent", "governor_models", "other_units_on_bus")
-    rows = [{k: u[k] for k in keep} | {"H_online_s": u["online"]["H_s"]} for u in units]
+            "reasons", "parameters", "interval", "playback_smape_percent", "playback_rms_percent_mbase",
+            "passes", "governor_models", "other_units_on_bus", "fallbacks")
+    rows = [{k: u[k] for k in keep} | {"H_online_s": u["online"]["H_s"],
+                                       "event_window_reasons": u["criteria"]["event_windows"]["reasons"]}
+            for u in units]
     (HERE / "results.json").write_text(json.dumps({"plants": rows}, indent=2) + "\n")
     (HERE / "results.md").write_text(report(rows, time.perf_counter() - t0))
     print(f"[naspi] wrote {HERE}/results.md in {time.perf_counter() - t0:.1f} s", file=sys.stderr)
@@ -71,19 +74,25 @@ def report(rows, wall_s):
         f"({', '.join(false_id) or 'none'}). Verdicts: "
         + ", ".join(f"{v} {sum(r['verdict'] == v for r in rows)}" for v in jd.VERDICTS) + ".",
         "",
+        f"Sharpness: of the {sum(abs(r['H_error_percent']) <= 5 for r in rows)} plants within 5 % of "
+        f"the .dyr H, {sum(abs(r['H_error_percent']) <= 5 and r['verdict'] == 'identified' for r in rows)} "
+        "are `identified`. Playback judged by window (`[criteria]`, peak deviation, dominant mode, RMS "
+        f"error of P and Q in % of MBASE): {sum(r['passes'] for r in rows)} of {len(rows)} pass.",
+        "",
         "| plant | S [MVA] | governors | other units | H .dyr [s] | H [s] | 95 % interval [s] | error [%] | "
-        "verdict | online DREM H [s] | replay sMAPE I_t [%] | P_t [%] | Q_t [%] |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "verdict of H | online DREM H [s] | replay sMAPE I_t [%] | RMS P [% MBASE] | RMS Q [% MBASE] | "
+        "windows |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        s, ci = r["playback_smape_percent"], r["H_ci95"]
-        why = ", ".join(k.replace("_", " ") for k in r["reasons"])
+        s, ci, rms = r["playback_smape_percent"], r["H_ci95"], r["playback_rms_percent_mbase"]
+        why = ", ".join(k.replace("_", " ") for k in r["parameters"]["H"]["reasons"])
         lines.append(
             f"| {r['name']} | {r['s_mva']:.0f} | {'/'.join(r['governor_models'])} | "
             f"{','.join(r['other_units_on_bus']) or '-'} | {r['H_reference_s']:.2f} | {f(r['H_s'])} | "
             f"{f(ci[0])}-{f(ci[1])} | {f(r['H_error_percent'], '+.1f')} | {r['verdict']}"
-            f"{f' ({why})' if why else ''} | {f(r['H_online_s'])} | {f(s['I_t'])} | {f(s['P_t'])} | "
-            f"{f(s['Q_t'])} |")
+            f"{f' ({why})' if why else ''} | {f(r['H_online_s'])} | {f(s['I_t'])} | {f(rms['P_t'])} | "
+            f"{f(rms['Q_t'])} | {'pass' if r['passes'] else 'fail: ' + '; '.join(r['event_window_reasons'])} |")
     lines += ["", "\"other units\": in-service units on the same bus without a GENROU record "
               "(renewables); their current is in the measured branch current.", ""]
     return "\n".join(lines)

@@ -31,6 +31,10 @@ HERE = Path(__file__).parent
 SMAPE_FROM_S = 30.0
 
 
+def config_values(cfg: jd.ObserverConfig) -> dict:
+    return {f: float(getattr(cfg, f)) for f in cfg.__dataclass_fields__}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--steps", type=int, default=60)
@@ -68,8 +72,8 @@ def main() -> None:
         }
     d, t = rows["default (Table I)"], rows["tuned"]
     speedup = d["median_convergence_time_s"] / t["median_convergence_time_s"]
-    out = {"config_start": jd.config_values(jd.ObserverConfig()),
-           "config_tuned": jd.config_values(res.config),
+    out = {"config_start": config_values(jd.ObserverConfig()),
+           "config_tuned": config_values(res.config),
            "train_loss": [res.loss_start, res.loss_tuned],
            "heldout_loss": [res.heldout_loss_start, res.heldout_loss_tuned], "steps": res.steps,
            "history": list(res.history), "tune_wall_s": round(tune_s, 1), "heldout": rows,

@@ -30,11 +30,11 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
+from builders import COLS, run_toml
 from jaxdse._app.cli import main
 
 pytestmark = pytest.mark.slow
 
-COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
 PLANT = """
 [line]
 x_pu = 0.005
@@ -50,19 +50,6 @@ v_rated_kv = 21.0
 f_nominal_hz = 50.0
 [governor]
 model = "TGOV1"
-"""
-CONFIG = """{top}
-[measurement]
-file = "{file}"
-v_base_kv = 400.0
-min_segment_s = 20.0
-{extra}
-[measurement.columns]
-{columns}
-{plant}
-[output]
-figures = false
-trajectories = false
 """
 H_HANDLED = 0.02
 """Largest relative H error of a handled case against the clean run."""
@@ -359,10 +346,8 @@ def run_case(tmp: Path, case: Case, recordings):
     if case.text:
         text = case.text((tmp / case.file).read_text())
         (tmp / case.file).write_bytes(text if isinstance(text, bytes) else text.encode())
-    columns = "\n".join(f"{k} = {v!r}".replace("'", '"') if isinstance(v, str) else f"{k} = {v}"
-                        for k, v in (case.columns or COLS).items())
-    config = CONFIG.format(top=case.top, file=case.file, extra=case.extra, columns=columns,
-                           plant=case.plant)
+    config = run_toml(case.file, top=case.top, extra=case.extra, columns=case.columns or COLS,
+                      plant=case.plant)
     (tmp / "c.toml").write_text(case.config(config) if case.config else config, encoding="utf-8")
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):

@@ -18,35 +18,10 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
+from builders import COLS, generator_toml, run_toml
 
 pytestmark = pytest.mark.slow
 
-COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
-CONFIG = """plant_defaults = "paper"
-
-[measurement]
-v_base_kv = 400.0
-min_segment_s = 20.0
-
-[measurement.columns]
-time = "t"
-frequency = "f"
-v_mag = "VM"
-v_ang = "VA"
-i_mag = "IM"
-i_ang = "IA"
-
-[output]
-figures = false
-trajectories = false
-"""
-GENERATOR = """
-[[generator]]
-name = "g{k}"
-a2_reference = {a2}
-[generator.measurement]
-file = "g{k}.csv"
-"""
 MAX_COMPILES = 3
 COMPILING = re.compile(r"Compiling jit\((\w+)\)")
 """Names of the jitted online estimator: jaxdse._many.batch jits ``one`` (vmapped estimate)."""
@@ -59,13 +34,13 @@ def ten_generators(pmu25, tmp_path_factory):
     root = tmp_path_factory.mktemp("ten")
     spec = jd.MeasurementSpec(file=(), columns=COLS, v_base_kv=400.0)
     cols = jd.phasor_columns(pmu25.recording, spec)
-    text = CONFIG
+    text = run_toml("unused.csv")
     for k in range(10):
         n = 1501 if k < 5 else 1251
         part = {name: x[:n] for name, x in cols.items()}
         part["IM"] = part["IM"] * (0.9 + 0.02 * k)
         jd.write_csv(root / f"g{k}.csv", part)
-        text += GENERATOR.format(k=k, a2=25.4 + 0.1 * k)
+        text += generator_toml(f"g{k}", f"g{k}.csv", 25.4 + 0.1 * k)
     (root / "ten.toml").write_text(text)
     return root
 

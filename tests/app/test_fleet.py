@@ -48,7 +48,7 @@ def ieee14(tmp_path_factory):
     """The ANDES ieee14 line trip as a fleet, run once (8 bootstrap draws instead of 32: time)."""
     out = tmp_path_factory.mktemp("fleet")
     fl = load_fleet(BENCH / "fleet_ieee14.toml")
-    doc = run_fleet(dataclasses.replace(fl, identify=jd.IdentifySettings(bootstrap_draws=8)), out)
+    doc = run_fleet(dataclasses.replace(fl, identify=jd.IdentifySettings(bootstrap_draws=4)), out)
     return 0, out, json.loads((out / "fleet.json").read_text()) | {"returned": doc}
 
 
@@ -205,11 +205,9 @@ def test_cli_fleet_with_a_bad_unit_runs_the_others(tmp_path, capsys, monkeypatch
             for name, bus, i in (("B1_G1", 1, "1"), ("B2_G1", 2, "1"), ("B3_G1", 3, "1"),
                                  ("B3_G2", 3, "2"), ("B6_G1", 6, "1"), ("B8_G1", 8, "1")))
         return (text[:text.index("[channels]")] + units
-                + "\n[identify]\nbootstrap_draws = 8\n\n[output]\nfigures = false\n")
+                + "\n[identify]\nbootstrap_draws = 4\n\n[output]\nfigures = false\n")
 
     cfg = _ieee14_case(tmp_path, raw=raw, dyr=dyr, fleet=fleet)
-    # run_fleet's default stream is the sys.stderr of its import: point it at this test's
-    monkeypatch.setattr(run_fleet, "__defaults__", (sys.stderr,))
     assert main(["fleet", str(cfg), "--out", str(tmp_path / "out")]) == 0
     err = capsys.readouterr().err
     assert "Traceback" not in err and "5 plant(s), 1 skipped" in err

@@ -8,31 +8,15 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
+from builders import COLS, run_toml
 from jaxdse._app.cli import main
 
 ROOT = Path(__file__).resolve().parents[2]
-COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
-CONFIG = """
-plant_defaults = "paper"
 
-[measurement]
-file = "pmu.csv"
-voltage_unit = "kV_LL"
-current_unit = "A"
-v_base_kv = 400.0
-min_segment_s = 20.0
-{extra}
-[measurement.columns]
-time = "t"
-frequency = "f"
-v_mag = "VM"
-v_ang = "VA"
-i_mag = "IM"
-i_ang = "IA"
 
-[output]
-figures = false
-"""
+def config(extra: str = "") -> str:
+    """The run config of these tests: kV (ph-ph) and A, figures off."""
+    return run_toml(extra=f'voltage_unit = "kV_LL"\ncurrent_unit = "A"\n{extra}', output="figures = false")
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +27,7 @@ def base_columns(pmu25):
 
 def run(tmp_path, columns, extra="", config=None, capsys=None):
     jd.write_csv(tmp_path / "pmu.csv", columns)
-    (tmp_path / "c.toml").write_text(config if config is not None else CONFIG.format(extra=extra))
+    (tmp_path / "c.toml").write_text(config if config is not None else config(extra))
     rc = main(["run", str(tmp_path / "c.toml"), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err if capsys else ""
     summary = (json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -81,14 +65,14 @@ def test_missing_column(tmp_path, base_columns, capsys):
 
 
 def test_wrong_unit_string(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=CONFIG.format(extra="").replace('"kV_LL"', '"kW"'),
+    rc, err, _ = run(tmp_path, base_columns, config=config("").replace('"kV_LL"', '"kW"'),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "c.toml" in line and "measurement.voltage_unit" in line and "'kW'" in line
 
 
 def test_unit_off_by_1000_is_caught(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=CONFIG.format(extra="").replace('"kV_LL"', '"V_LL"'),
+    rc, err, _ = run(tmp_path, base_columns, config=config("").replace('"kV_LL"', '"V_LL"'),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "pmu.csv" in line and "'VM'" in line and "voltage_unit" in line
@@ -187,7 +171,7 @@ def test_malformed_toml(tmp_path, base_columns, capsys):
 
 
 def test_unknown_key(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=CONFIG.format(extra="v_base_kw = 3"),
+    rc, err, _ = run(tmp_path, base_columns, config=config("v_base_kw = 3"),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "key 'measurement.v_base_kw'" in line and "v_base_kv" in line
@@ -200,7 +184,7 @@ def test_unknown_key(tmp_path, base_columns, capsys):
     ("observer", "gamma1", 0, "must be > 0"),
 ])
 def test_impossible_values_name_the_key(tmp_path, base_columns, capsys, section, key, value, words):
-    cfg = CONFIG.format(extra="") + f"\n[{section}]\n{key} = {value}\n"
+    cfg = config("") + f"\n[{section}]\n{key} = {value}\n"
     rc, err, _ = run(tmp_path, base_columns, config=cfg, capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and f"key '{section}.{key}'" in line and words in line
@@ -210,7 +194,7 @@ def test_file_that_does_not_exist(tmp_path, capsys):
     rc = main(["run", str(tmp_path / "nope.toml")])
     line = one_line_error(capsys.readouterr().err)
     assert rc == 2 and "nope.toml" in line and "does not exist" in line
-    (tmp_path / "c.toml").write_text(CONFIG.format(extra=""))
+    (tmp_path / "c.toml").write_text(config(""))
     rc = main(["run", str(tmp_path / "c.toml")])
     line = one_line_error(capsys.readouterr().err)
     assert rc == 2 and "pmu.csv" in line and "does not exist" in line

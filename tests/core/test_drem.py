@@ -5,6 +5,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxdse as jd
+from jaxdse._core.integrate import Trapezoid
 from jaxdse._core import drem
 from jaxdse._core.drem import _filter3_rhs, _hd_rhs
 from jaxdse._core.integrate import integrate_sampled
@@ -99,7 +100,7 @@ def test_trapezoid_equals_diffrax_heun():
     y0 = {"x": jnp.array(1.0), "v": jnp.array(0.3)}
     for ctrl in (diffrax.ConstantStepSize(), diffrax.PIDController(rtol=1e-5, atol=1e-7)):
         sols = [diffrax.diffeqsolve(term, s, 0.0, 5.0, 0.05, y0, stepsize_controller=ctrl)
-                for s in (jd.Trapezoid(), diffrax.Heun())]
+                for s in (Trapezoid(), diffrax.Heun())]
         assert int(sols[0].stats["num_steps"]) == int(sols[1].stats["num_steps"])
         for k in y0:
             np.testing.assert_allclose(sols[0].ys[k], sols[1].ys[k], rtol=1e-12, atol=1e-14)

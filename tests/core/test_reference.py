@@ -6,6 +6,7 @@ import numpy as np
 from numpy_reference import observer_loop  # benchmarks/ (pytest pythonpath)
 
 import jaxdse as jd
+from jaxdse._core.drem import run_observer
 from jaxdse._core.drem import DremInputs
 from jaxdse._core.front_end import front_end, reference_torque
 
@@ -20,7 +21,7 @@ def test_observer_matches_numpy_loop(ambient, plant):
     t_ref = reference_torque(rec.t_s, fe, plant.governor, jd.Settings())
     delta = fe.alg.delta_rad - fe.alg.delta_rad[0]
     inputs = DremInputs(delta, fe.alg.t_e_pu, fe.dw, jnp.zeros(n))
-    run = jax.jit(lambda *a: jd.run_observer(*a, jd.Integrator.fast(), False, x2_meas=fe.x2_meas,
+    run = jax.jit(lambda *a: run_observer(*a, jd.Integrator.fast(), False, x2_meas=fe.x2_meas,
                                              save_trajectory=True))
     traj = run(rec.t_s, inputs, fe.x2_meas[0], t_ref, cfg, plant.governor).trajectory
     as_dict = {f: float(getattr(cfg, f)) for f in cfg.__dataclass_fields__}

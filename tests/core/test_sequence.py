@@ -2,6 +2,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxdse as jd
+from jaxdse._core.sequence import positive_sequence
 from jaxdse._core.sequence import phases_from_sequences, sequence_components
 
 
@@ -9,7 +10,7 @@ def test_fortescue_round_trip(rng):
     x = rng.standard_normal((100, 3)) + 1j * rng.standard_normal((100, 3))
     x0, x1, x2 = sequence_components(jnp.asarray(x))
     np.testing.assert_allclose(phases_from_sequences(x0, x1, x2), x, atol=1e-13)
-    np.testing.assert_allclose(jd.positive_sequence(jnp.asarray(x)), x1, atol=1e-13)
+    np.testing.assert_allclose(positive_sequence(jnp.asarray(x)), x1, atol=1e-13)
 
 
 def test_balanced_set_is_pure_positive_sequence():

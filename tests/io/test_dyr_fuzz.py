@@ -202,11 +202,13 @@ DAMAGE = {
                   "case.raw, row 13: generator record: field 9 (MBASE) is not a number: 'nan'"),
     "MBASE zero": (lambda c: c.gens[1].__setitem__(MBASE, "0"), "B3_G1", "skip",
                    "generator on bus 3 id '1' (case.raw line 13): MBASE = 0 MVA must be > 0"),
-    "ZR negative": (lambda c: c.gens[0].__setitem__(ZR, "-0.01"), "B2_G1", "skip", "ZR (Ra) = -0.01 must be >= 0"),
+    "ZR negative": (lambda c: c.gens[0].__setitem__(ZR, "-0.01"), "B2_G1", "skip",
+                    "ZR (Ra) = -0.01 must be >= 0"),
     "GENCLS ZX zero": (lambda c: c.gens[3].__setitem__(ZX, "0"), "B5_G1", "skip",
                        "ZX (X'd of GENCLS) = 0 must be > 0"),
     "generator record missing": (lambda c: (c.gens.pop(2), c.gen_units.pop(2)), "B4_G1", "skip",
-                                 "GENSAL on bus 4 id '1' (case.dyr line 6): no generator on bus 4 with ID '1'"),
+                                 "GENSAL on bus 4 id '1' (case.dyr line 6): no generator on bus 4 with "
+                                 "ID '1'"),
     "bus base voltage zero": (lambda c: c.buses[4].__setitem__(1, "0"), "B4_G1", "skip",
                               "bus 4 (G4) has base voltage 0.0 kV; it must be > 0"),
     "column missing": (lambda c: c.columns.remove("B2_G1/IA"), "B2_G1", "skip",
@@ -253,6 +255,7 @@ def test_no_usable_unit_is_one_input_error(tmp_path):
 
 # --- fuzzing ----------------------------------------------------------------------------------
 
+FACTORS = (0.0, -1.0, 0.5, 0.9, 1.1, 2.0, 10.0, 1e-6, 1e6)
 TOKENS = ("nan", "NaN", "inf", "1e999", "-1e999", "0", "-0", "-1", "-0.5", "1e-9", "1000", "x", "'7'")
 PHASES = (Phase.explicit, Phase.generate, Phase.shrink)
 
@@ -260,32 +263,31 @@ PHASES = (Phase.explicit, Phase.generate, Phase.shrink)
 @st.composite
 def damages(draw):
     """A list of (kind, target, detail): at most 4 damages to the case."""
-    n_dyr, n_gen = len(DYR), len(GENERATORS)
+    rec, gen = st.integers(0, len(DYR) - 1), st.integers(0, len(GENERATORS) - 1)
+
+    def kind(name, target, detail=st.none(), extra=st.none()):
+        return st.tuples(st.just(name), target, detail, extra)
+
     one = st.one_of(
-        st.tuples(st.just("scale"), st.integers(0, n_dyr - 1), st.integers(0, 40),
-                  st.sampled_from([0.0, -1.0, 0.5, 0.9, 1.1, 2.0, 10.0, 1e-6, 1e6])),
-        st.tuples(st.just("token"), st.integers(0, n_dyr - 1), st.integers(0, 40), st.sampled_from(TOKENS)),
-        st.tuples(st.just("inconsistent"), st.sampled_from([0, 3, 8]),
-                  st.sampled_from(["X''d<Xl", "X''d=Xl", "X''d>X'q", "X'd>Xd", "X'q>Xq"]), st.none()),
-        st.tuples(st.just("delete"), st.integers(0, n_dyr - 1), st.none(), st.none()),
-        st.tuples(st.just("duplicate"), st.integers(0, n_dyr - 1), st.sampled_from([1.0, 2.0, -1.0]), st.none()),
-        st.tuples(st.just("rename"), st.integers(0, n_dyr - 1),
-                  st.sampled_from(["GENQEC", "GENTRA", "IEEEG3", "WSIEG1", "XYZ9", "GENROU", "GENCLS",
-                                   "TGOV1", "GAST", "SEXS"]), st.none()),
-        st.tuples(st.just("drop constant"), st.integers(0, n_dyr - 1), st.none(), st.none()),
-        st.tuples(st.just("extra constant"), st.integers(0, n_dyr - 1), st.sampled_from(["0", "x"]), st.none()),
-        st.tuples(st.just("no terminator"), st.integers(0, n_dyr - 1), st.none(), st.none()),
-        st.tuples(st.just("bus number"), st.integers(0, n_dyr - 1), st.sampled_from(["x", "2.5", "nan"]), st.none()),
-        st.tuples(st.just("generator field"), st.integers(0, n_gen - 1), st.sampled_from([MBASE, ZR, ZX, 2]),
-                  st.sampled_from(TOKENS)),
-        st.tuples(st.just("generator status"), st.integers(0, n_gen - 1), st.sampled_from(["0", "nan", "1.5"]),
-                  st.none()),
-        st.tuples(st.just("delete generator"), st.integers(0, n_gen - 1), st.none(), st.none()),
-        st.tuples(st.just("duplicate generator"), st.integers(0, n_gen - 1), st.sampled_from(TOKENS), st.none()),
-        st.tuples(st.just("bus kV"), st.integers(2, 5), st.sampled_from(["0", "-20", "nan", "1e999"]), st.none()),
-        st.tuples(st.just("every H"), st.just(0), st.sampled_from(["-1", "0", "nan", "2.0"]), st.none()),
-        st.tuples(st.just("delete column"), st.integers(0, len(UNITS) - 1),
-                  st.sampled_from([*ROLES, "all"]), st.none()),
+        kind("scale", rec, st.integers(0, 40), st.sampled_from(FACTORS)),
+        kind("token", rec, st.integers(0, 40), st.sampled_from(TOKENS)),
+        kind("inconsistent", st.sampled_from([0, 3, 8]),
+             st.sampled_from(["X''d<Xl", "X''d=Xl", "X''d>X'q", "X'd>Xd", "X'q>Xq"])),
+        kind("delete", rec),
+        kind("duplicate", rec, st.sampled_from([1.0, 2.0, -1.0])),
+        kind("rename", rec, st.sampled_from(["GENQEC", "GENTRA", "IEEEG3", "WSIEG1", "XYZ9", "GENROU",
+                                             "GENCLS", "TGOV1", "GAST", "SEXS"])),
+        kind("drop constant", rec),
+        kind("extra constant", rec, st.sampled_from(["0", "x"])),
+        kind("no terminator", rec),
+        kind("bus number", rec, st.sampled_from(["x", "2.5", "nan"])),
+        kind("generator field", gen, st.sampled_from([MBASE, ZR, ZX, 2]), st.sampled_from(TOKENS)),
+        kind("generator status", gen, st.sampled_from(["0", "nan", "1.5"])),
+        kind("delete generator", gen),
+        kind("duplicate generator", gen, st.sampled_from(TOKENS)),
+        kind("bus kV", st.integers(2, 5), st.sampled_from(["0", "-20", "nan", "1e999"])),
+        kind("every H", st.just(0), st.sampled_from(["-1", "0", "nan", "2.0"])),
+        kind("delete column", st.integers(0, len(UNITS) - 1), st.sampled_from([*ROLES, "all"])),
     )
     return draw(st.lists(one, min_size=0, max_size=4))
 

@@ -19,27 +19,9 @@ from hypothesis import HealthCheck, Phase, event, given, settings
 from hypothesis import strategies as st
 
 import jaxdse as jd
+from builders import COLS, run_toml
 from jaxdse._app.cli import main
 
-COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
-CONFIG = """plant_defaults = "paper"
-[measurement]
-file = "{file}"
-v_base_kv = 400.0
-min_segment_s = 20.0
-on_long_gap = "error"
-{extra}
-[measurement.columns]
-time = "t"
-frequency = "f"
-v_mag = "VM"
-v_ang = "VA"
-i_mag = "IM"
-i_ang = "IA"
-[output]
-figures = false
-trajectories = false
-"""
 PHASES = (Phase.explicit, Phase.generate, Phase.shrink)
 """No explain phase (it reruns a failing example hundreds of times)."""
 H_WRONG = 0.10
@@ -129,7 +111,7 @@ class Files:
     def write(self, cols, extra=""):
         k = next(self.count)
         jd.write_csv(self.root / f"pmu{k}.csv", cols)
-        (self.root / f"c{k}.toml").write_text(CONFIG.format(file=f"pmu{k}.csv", extra=extra))
+        (self.root / f"c{k}.toml").write_text(run_toml(f"pmu{k}.csv", extra='on_long_gap = "error"\n' + extra))
         return self.root / f"pmu{k}.csv", self.root / f"c{k}.toml"
 
 

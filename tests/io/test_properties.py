@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
 import jaxdse as jd
+from jaxdse._app.report import summary_entry
 
 COLS = {"time": "t", "frequency": "f", "v_mag": "VM", "v_ang": "VA", "i_mag": "IM", "i_ang": "IA"}
 N_EST = 1400
@@ -101,7 +102,7 @@ def test_estimator_never_returns_an_unflagged_nan(base, plant, estimate_jit, d):
     event("reached the estimator")
     rec = jax.tree_util.tree_map(lambda x: x[:N_EST], rec)
     est = estimate_jit(rec, plant, jd.ObserverConfig())
-    entry = jd.summary_entry("p", est)
+    entry = summary_entry("p", est)
     tr = est.trajectories
     finite = all(np.all(np.isfinite(np.asarray(x))) for x in (
         est.a1_hat, est.a2_hat, tr.x2_hat_rad_s, tr.playback.x2_rad_s, tr.e_f_pu, tr.t_m_pu))

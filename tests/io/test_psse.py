@@ -527,3 +527,55 @@ def test_governor_from_dyr(tmp_path):
     assert float(gg.torque(gg.steady_state(tr, 0.0), 0.0)) == pytest.approx(0.6)
     with pytest.raises(jd.InputError, match="not a supported governor"):
         psse.governor_from_dyr(psse.read_dyr(write(tmp_path, "s.dyr", "1 SEXS 1 0.1 10 100 0.1 0 3 /\n")).records[0])
+
+
+def test_lenient_reading_keeps_bad_records_with_their_problem(tmp_path):
+    """strict=False (jaxdse fleet): a malformed record of a machine stays, with the message
+    strict reading raises, so that only its unit is left out; one that names no machine is
+    dropped and listed; good records read as in strict mode."""
+    text = """
+        1 'GENCLS' 1 3.0 0.0 /
+        2 'GENCLS' 1 nan 0.0 /
+        3 'TGOV1' 1 0.05 0.5 1.0 /
+        4x 'GENCLS' 1 3.0 0.0 /
+        5 'GENCLS' 1 'abc 0.0 /
+        6 'GENCLS' 1 2.0
+        """
+    p = write(tmp_path, "l.dyr", text)
+    with pytest.raises(jd.InputError, match="constant 1 \\(H\\) is not a number: 'nan'"):
+        psse.read_dyr(p)
+    d = psse.read_dyr(p, strict=False)
+    assert [(r.bus, r.model) for r in d.records] == [(1, "GENCLS"), (2, "GENCLS"), (3, "TGOV1"),
+                                                     (5, "GENCLS"), (6, "GENCLS")]
+    assert d.records[0].problem is None and d.records[0].params == {"H": 3.0, "D": 0.0}
+    assert d.records[1].problem == f"{p}, row 2: GENCLS bus 2 id '1': constant 1 (H) is not a number: 'nan'"
+    assert math.isnan(d.records[1]["H"])
+    assert "TGOV1 bus 3 id '1' has 3 constants, expected 7" in d.records[2].problem
+    assert "unclosed quote" in d.records[3].problem
+    assert "has no terminating '/'" in d.records[4].problem
+    assert d.problems == [f"{p}, row 4: record for model GENCLS: the bus number is '4x', not an integer"]
+    assert [r.model for r in d.unit_records(2, "1")] == ["GENCLS"]
+
+
+def test_lenient_raw_and_plant_data_checks(tmp_path):
+    text = _rev32(RAW33).replace("  1000.000, 2.00000E-3", "  nan, 2.00000E-3")
+    text = text.replace("     3,'TER BUS     ',  10.5000", "     3,'TER BUS     ',  10.5000\n     3,'AGAIN',  10.5")
+    p = write(tmp_path, "l.raw", text)
+    with pytest.raises(jd.InputError, match="row 7: bus 3 is defined twice \\(first at line 6\\)"):
+        psse.read_raw(p)
+    r = psse.read_raw(p, strict=False)
+    g = r.generator(2, "G1")
+    assert math.isnan(g.mbase_mva) and g.pg_mw == 800.0 and "field 9 (MBASE)" in g.problem
+    assert r.buses[3].name == "TER BUS" and any("bus 3 is defined twice" in x for x in r.problems)
+    dyr = psse.read_dyr(write(tmp_path, "c.dyr", """
+        2 'GENROU' G1 6.5 0.03 0.9 0.05 4.0 2.0 1.8 1.7 0.3 0.55 0.12 0.15 0.03 0.4 /
+        2 'GENSAL' G2 5.0 0.05 0.1 -3.2 0.0 1.1 0.7 1.3 0.25 0.15 0.1 0.3 /
+        """))
+    rou = dyr.machine(2, "G1")
+    assert psse.q_axis_problems(rou) == ["GENROU on bus 2 id 'G1' (c.dyr line 1): X''d = 0.12 below Xl = 0.15"]
+    assert psse.machine_problems(rou, g) == [g.problem]
+    good = psse.read_raw(write(tmp_path, "g.raw", _rev32(RAW33))).generator(2, "G1")
+    assert psse.machine_problems(rou, good) == []
+    assert psse.machine_problems(dyr.machine(2, "G2"), good) == [
+        "GENSAL on bus 2 id 'G2' (c.dyr line 2): H = -3.2 must be > 0",
+        "GENSAL on bus 2 id 'G2' (c.dyr line 2): X'd = 1.3 above Xd = 1.1"]

@@ -11,7 +11,9 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse import TUNABLE, from_log, sweep_configs, to_log, tuning_loss
+from jaxdse import sweep_configs, tuning_loss
+from jaxdse._core.tuning import TUNABLE
+from jaxdse._many.tune import from_log, to_log
 from jaxdse._app.cli import main
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

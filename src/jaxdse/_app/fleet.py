@@ -44,7 +44,7 @@ every sample; the members that follow their data need a few."""
 
 # --- running ----------------------------------------------------------------------------------
 
-def run_fleet(fleet: Fleet, out_dir: Path, stream=sys.stderr) -> dict:
+def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     """Estimate every plant of ``fleet``; write fleet.json, fleet.csv and the HTML report.
 
     Returns the fleet.json document. Raises :class:`InputError` when no plant's recording
@@ -52,6 +52,9 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=sys.stderr) -> dict:
     """
     t_start = time.perf_counter()
     out_dir = Path(out_dir)
+    stream = stream or sys.stderr
+    for note in fleet.notes:
+        print(f"jaxdse: note: {note}", file=stream)
     unknown = fleet.dyr.unknown_models
     if unknown:
         print(f"jaxdse: note: {fleet.dyr.source}: models read but not used: {', '.join(unknown)}",
@@ -108,7 +111,7 @@ def _capped(integ):
         if integ.adaptive else integ
 
 
-def fleet(path, out_dir, stream=sys.stderr) -> list[dict]:
+def fleet(path, out_dir, stream=None) -> list[dict]:
     """``jaxdse fleet`` from Python: one row (dict) per plant (``fleet.json["units"]``)."""
     return run_fleet(load_fleet(path), Path(out_dir), stream)["units"]
 
@@ -151,6 +154,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict) -> 
         "units": [dataclasses.asdict(u) for u in p.members],
         "governor_models": sorted({u.governor or "none (constant torque)" for u in p.members}),
         "other_units_on_bus": list(p.others),
+        "fallbacks": list(p.fallbacks),
         "machine": module_values(m),
         "columns": dict(p.run.measurement.columns),
         "current_direction": p.run.measurement.current_direction,
@@ -231,7 +235,7 @@ def fleet_document(fleet: Fleet, entries: list[dict], skipped: list[dict], wall_
                                               and abs(e["H_error_percent"]) > 10.0],
             "verdicts": dict(Counter(e["verdict"] for e in entries)),
         },
-        "units": entries, "skipped": skipped,
+        "units": entries, "skipped": skipped, "notes": list(fleet.notes),
         "criteria": fleet.criteria,
         "observer": module_values(fleet.observer), "settings": settings_values(fleet.settings),
         "identify": None if fleet.identify is None else module_values(fleet.identify),

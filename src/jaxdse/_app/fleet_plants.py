@@ -5,6 +5,13 @@ their MBASE (reactances, T'do and Rs MBASE-weighted; the reference H is the MBAS
 of the machine records); the governor is the :class:`WeightedGovernor` of the units' own
 governor records. Every plant gets the same governor slots (zero weight where a plant has
 fewer units of a type), so that all plants share one pytree structure.
+
+Every unit is checked on its own (:func:`plant_units`): a unit whose records are malformed,
+missing or implausible makes its plant a skipped one, with the reason in one line; where a
+standard fallback exists the unit runs with it and says so in the plant's notes (q-axis
+circuits with X''d not above Xl, above X'q, or X'q above Xq: left out, the transient model;
+no governor record, or one jaxdse does not model: constant mechanical torque; a second record
+for the same machine: the first is used).
 """
 
 from __future__ import annotations

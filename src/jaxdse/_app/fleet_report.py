@@ -257,6 +257,9 @@ oscillation after the event window. A whole-record average (sMAPE) is reported, 
 def unit_page(e: dict, doc: dict, figures: bool) -> str:
     name = html.escape(e["name"])
     decisive, notes = _decisive(e), [v for k, v in e["reasons"].items() if k in NOTES]
+    fallbacks = ("<p><b>Plant data fallbacks</b> (the .dyr records as read, and what jaxdse did):</p><ul>"
+                 + "".join(f"<li>{html.escape(f)}</li>" for f in e.get("fallbacks", [])) + "</ul>"
+                 if e.get("fallbacks") else "")
     why = {"identified": "The recording determines H to within ±10 % at 95 % confidence and the "
                          "playback with the identified H and D follows the measurement.",
            "weakly identified": "An estimate is given, but it is not tight enough to file as identified:",
@@ -332,6 +335,7 @@ Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.2f')} %,
 <th>RMS error</th><th>aligned RMS error (shift)</th><th>mode measured</th><th>mode replay</th></tr>
 {win_rows}</table>
 <h2>Plant (from the PSS/E case)</h2>
+{fallbacks}
 <table><tr><th>unit ID</th><th>model</th><th>MBASE [MVA]</th><th>H [s]</th><th>governor</th></tr>
 {unit_rows}</table>
 {others}

@@ -30,11 +30,13 @@ The noise part propagates white noise of the levels measured on the recording it
 differences of |V|, |I|, the angles and f) through the whole front end and the weighted fit:
 
 * ``"bootstrap"`` (default): ``bootstrap_draws`` refits, vmapped, on the recording with
-  white noise of those levels added once more, each refit one Gauss-Newton step of the
-  weighted least squares with the fit's Huber weights (theta + A^-1 X_k^T W (z_k - X_k theta),
-  A = X^T W X). A first-order (delta-method) propagation is no substitute: the noise of |V|
-  and |I| enters a2's score through products of two noisy regressors (errors in variables),
-  and on the bench's recordings that second-order part is 2-4x the first-order one;
+  white noise of those levels added once more, each refit the weighted least squares with
+  the fit's Huber weights (a solve of the draw's own normal equations; no reweighting). Neither
+  a first-order (delta-method) propagation nor a one-step refit (theta + A^-1 X_k^T W r_k with
+  the fit's A) is a substitute: the noise of |V|, |I| and the angles enters the regressors and
+  the left-hand side together (errors in variables, through the same filtered rotor angle),
+  and its second-order terms in X_k^T W X_k and X_k^T W z_k cancel only in the full solve; on
+  the ANDES bench the one-step form widened some intervals tenfold;
 * ``"sandwich"``: the Newey-West sandwich of the residuals, whose Bartlett window
   ``hac_window_s`` covers the filtered residual's autocorrelation (no noise model).
 
@@ -242,16 +244,15 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     spread = jnp.max(jnp.abs(others / theta[1] - 1.0))
     levels = noise_levels(recording, fe.valid)
     if s.noise_interval == "bootstrap":
-        def draw(key):  # one Gauss-Newton step of the weighted fit on the recording with more noise
+        def draw(key):  # the weighted fit (the fit's Huber weights) on the recording with more noise
             # Each sample's noise from its own index: a padded recording gets the same draws.
             e = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(key, k), (5,), dtype=ts.dtype))(
                 jnp.arange(ts.shape[0])).T
             noisy = add_noise(recording, levels, e)
-            x, z = _regression(_signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing,
-                                        dt)[0], filters[1.0])
-            return theta + bread @ (x.T @ (weights * (z - x @ theta)))
+            x, zk = _regression(_signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing,
+                                         dt)[0], filters[1.0])
+            return solve_spd(x.T @ (x * weights[:, None]), x.T @ (weights * zk))
 
-        bread = solve_spd(normal, jnp.eye(4, dtype=ts.dtype))
         keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
         cov = jnp.cov(jax.vmap(draw)(keys), rowvar=False)
     ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, levels, jnp.array(False),

@@ -54,11 +54,13 @@ REASONS = {
 _BIT = {name: 1 << k for k, name in enumerate(REASONS)}
 _FAILED = ("offline", "solver", "not_finite", "h_not_positive", "playback_diverged")
 _NOT_IDENTIFIED = ("interval_very_wide",)
-_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor", "drem_contradicts")
+_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor")
 FINDINGS = ("negative_damping", "d_interval_wide", "governor_model_off")
 """Reasons about D and the governor correction: they set those parameters' verdicts, not H's."""
-NOTES = ("drem_disagrees", "drem_not_converged") + FINDINGS
-"""Reasons that do not set the headline (H's) verdict."""
+NOTES = ("drem_contradicts", "drem_disagrees", "drem_not_converged") + FINDINGS
+"""Reasons that do not set the headline (H's) verdict. The online DREM/I&I estimate uses a
+fraction of the recording's information (it adapts slowly, from its start); whether it
+converged, and where, is reported beside the batch H, never held against it."""
 
 
 class VerdictSettings(eqx.Module):

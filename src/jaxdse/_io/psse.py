@@ -271,7 +271,7 @@ def read_dyr(path, *, strict: bool = True) -> DyrData:
                 raise
             problems.append(str(e))
             return
-        if problem is not None and rec.problem is None:
+        if problem is not None:         # the first thing wrong in reading order
             rec = replace(rec, problem=problem)
         records.append(rec)
 
