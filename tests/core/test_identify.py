@@ -79,8 +79,9 @@ CASES = {
     "playback_diverged": ({"replay__ok": True}, None),  # set through the sMAPE below
     "interval_very_wide": ({"identified__relative_ci": 0.8}, 2),
     "interval_wide": ({"identified__relative_ci": 0.2}, 1),
-    "h_rests_on_damping": ({"identified__h_without_damping_s": 100.0}, 1),
-    "h_rests_on_governor": ({"identified__h_without_governor_correction_s": 100.0}, 1),
+    "h_rests_on_damping": ({"identified__h_without_damping_s": 100.0, "identified__a1": 0.0}, 1),
+    "h_rests_on_governor": ({"identified__h_without_governor_correction_s": 100.0,
+                             "identified__governor_gain_error": 0.0}, 1),
     "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 0),
     "d_interval_wide": ({"identified__d_ci95": [-10.0, 10.0]}, 0),
     "governor_model_off": ({"identified__governor_gain_error": -0.6}, 0),
@@ -112,3 +113,8 @@ def test_playback_diverged_and_drem_bits(assessed):
     assert int(v.reasons) & _BIT["drem_contradicts"] and int(v.reasons) & _BIT["drem_disagrees"]
     assert int(v.code) == 0  # a note: the online estimate never sets H's verdict
     assert set(CASES) | {"drem_contradicts", "drem_disagrees"} == set(REASONS)
+    # an alternative the data reject (a coefficient far from 0 with confidence) is no assumption
+    sure = _with(assessed, identified__h_without_governor_correction_s=100.0,
+                 identified__governor_gain_error=0.4, identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))
+    v = verdict(sure.estimate, sure.identified, sure.replay)
+    assert not int(v.reasons) & _BIT["h_rests_on_governor"] and int(v.code) == 0

@@ -158,9 +158,10 @@ class Identified(eqx.Module):
     """The part from the measurement noise: 1.96 se_a2 / a2 [-]."""
     filter_spread: Float[Array, ""]
     """Largest relative change of a2 when the filter F is made slower or faster
-    (``IdentifySettings.spread_scales``) [-]. Were the model right, every filter would find
-    the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model
-    that is off), which the residual's variance does not show."""
+    (``IdentifySettings.spread_scales``), beyond that fit's own 95 % noise half width [-].
+    Were the model right, every filter would find the same a2 up to noise; a spread beyond
+    it is model error (a 6th-order machine, a governor model that is off), which the
+    residual's variance does not show."""
     information: Float[Array, "4 4"]
     """Information matrix of (a1, a2, c, g), scaled to unit diagonal [-]; its condition number
     (:func:`condition_number`, on the host) tells whether a2 is separable from the others."""
@@ -232,16 +233,20 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     normal, rhs = design.T @ (design * weights[:, None]), design.T @ (weights * z)
     a2_without = jnp.stack([_fit_without(normal, rhs, j)[1] for j in (0, 3)])
     cov, info = _sandwich(design * (weights * resid)[:, None], (design * slope[:, None]).T @ design, window)
-    if s.spread_scales:  # the same samples weighted as in the fit: one weighted solve per filter
-        def refit(disc):
-            x, zz = _regression(signals, disc)
-            return solve_spd(x.T @ (x * weights[:, None]), x.T @ (weights * zz))[1]
+    if s.spread_scales:
+        def other(disc):  # each filter's own Huber fit, and the noise part of its a2 (sandwich)
+            x, _, (th, w, sl, r) = fit(disc, signals)
+            cov_k = _sandwich(x * (w * r)[:, None], (x * sl[:, None]).T @ x, window)[0]
+            return th[1], Z95 * jnp.sqrt(jnp.maximum(cov_k[1, 1], 0.0))
 
-        others = jax.vmap(refit)(
+        a2_k, half_k = jax.vmap(other)(
             jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(filters[k] for k in s.spread_scales)))
+        # A change within the other fit's own noise is no evidence of model error: a slow filter
+        # on a short recording of small swings may see almost nothing (its a2 then moves by
+        # hundreds of % with an interval wider still).
+        spread = jnp.max(jnp.maximum(jnp.abs(a2_k / theta[1] - 1.0) - half_k / jnp.abs(a2_k), 0.0))
     else:
-        others = theta[1:2]
-    spread = jnp.max(jnp.abs(others / theta[1] - 1.0))
+        spread = jnp.zeros((), ts.dtype)
     levels = noise_levels(recording, fe.valid)
     if s.noise_interval == "bootstrap":
         def draw(key):  # the weighted fit (the fit's Huber weights) on the recording with more noise

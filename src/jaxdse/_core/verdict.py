@@ -1,8 +1,10 @@
 """A verdict per parameter: identified, weakly identified, not identified or failed.
 
 H gets its own verdict from its own marginal 95 % interval and from what it rests on: the
-same fit with D fixed at 0 and with the governor correction fixed at 0 (if H moves outside
-its interval under either, H is downgraded and the reason names the assumption). D and the
+same fit with D fixed at 0 and with the governor correction fixed at 0. If H moves outside
+its interval under an alternative that the data cannot rule out (the coefficient's own 95 %
+interval contains 0), H is downgraded and the reason names the assumption; an alternative
+the data reject is no assumption. D and the
 governor correction get their own verdicts, with the model-structure findings in words (a
 3rd-order model lumps the excitation and stabiliser damping into D; a governor response far
 from the .dyr model's). The unit's headline is H's verdict, because H is what the fleet report
@@ -20,7 +22,7 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .estimate import Replay
-from .identify import Identified
+from .identify import Z95, Identified
 from .result import Estimate
 
 VERDICTS = ("identified", "weakly identified", "not identified", "failed")
@@ -36,9 +38,10 @@ REASONS = {
     # H (the headline)
     "interval_very_wide": "the 95 % interval of H is wider than the not-identified limit (or unbounded)",
     "interval_wide": "the 95 % interval of H is wider than the identified limit",
-    "h_rests_on_damping": "H moves outside its interval when D is fixed at 0: H rests on the fitted damping",
-    "h_rests_on_governor": "H moves outside its interval without the governor correction: H rests on "
-                           "correcting the governor model",
+    "h_rests_on_damping": "H moves outside its interval when D is fixed at 0, which the data cannot rule "
+                          "out: H rests on the fitted damping",
+    "h_rests_on_governor": "H moves outside its interval without the governor correction, which the data "
+                           "cannot rule out: H rests on correcting the governor model",
     "drem_contradicts": "the online (DREM) estimate converged more than the identified limit away from "
                         "the batch H",
     # D and the governor correction (their own verdicts; model-structure findings in words)
@@ -109,8 +112,10 @@ def verdict(est: Estimate, ident: Identified, rep: Replay,
         "playback_diverged": ~(rep.smape.i_t <= settings.diverged_smape),
         "interval_very_wide": ~(ident.relative_ci <= settings.not_identified_ci) | ~jnp.isfinite(hi),
         "interval_wide": ~(ident.relative_ci <= settings.identified_ci),
-        "h_rests_on_damping": outside(ident.h_without_damping_s),
-        "h_rests_on_governor": outside(ident.h_without_governor_correction_s),
+        # An alternative counts only where the data cannot rule it out (its coefficient within
+        # 95 % of 0): where they ask for D or a correction with confidence, H rests on the data.
+        "h_rests_on_damping": outside(ident.h_without_damping_s) & plausible_zero(ident, 0),
+        "h_rests_on_governor": outside(ident.h_without_governor_correction_s) & plausible_zero(ident, 3),
         "drem_contradicts": est.converged & ~(jnp.abs(drem_h / ident.h_s - 1.0) <= settings.identified_ci),
         "negative_damping": d_hi < 0,
         "d_interval_wide": ~(0.5 * (d_hi - d_lo) <= jnp.abs(ident.d_pu_s)),
@@ -130,6 +135,12 @@ def verdict(est: Estimate, ident: Identified, rep: Replay,
     gov_code = jnp.where(failed, 3, jnp.where(flags["governor_model_off"], 1, 0))
     return Verdict(code=code, reasons=jnp.asarray(reasons, dtype=jnp.int32), d_code=d_code,
                    governor_code=gov_code)
+
+
+def plausible_zero(ident: Identified, k: int):
+    """Coefficient ``k`` of (a1, a2, c, g) is within its 95 % interval of 0."""
+    coef = (ident.a1, ident.a2, ident.t_m_offset_pu * ident.a2, ident.governor_gain_error * ident.a2)[k]
+    return jnp.abs(coef) <= Z95 * jnp.sqrt(jnp.maximum(ident.covariance[k, k], 0.0))
 
 
 def online_verdict(est: Estimate) -> Verdict:
