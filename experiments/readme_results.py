@@ -35,7 +35,10 @@ def block() -> str:
             f"{100 * bench['ambient_within_10pct_fraction']:.1f} % of {bench['ambient_units']}. The 95 % "
             f"interval contains the true H in {100 * bench['ci95_coverage']:.1f} % of "
             f"{bench['ci95_coverage_draws']} noisy identifications ({bench['ci95_coverage_machines']} "
-            f"machines). Units `identified` with an H error above 10 %: {bench['false_identified']}.")
+            f"machines). Units `identified` with an H error above 10 %: {bench['false_identified']}. "
+            f"Of the event recordings within 5 % of the truth, {bench['sharpness']['events']['identified']} of "
+            f"{bench['sharpness']['events']['within_5pct']} are `identified` (all recordings: "
+            f"{bench['sharpness']['all']['identified']} of {bench['sharpness']['all']['within_5pct']}).")
     naspi = load("experiments/naspi_osl_case1/results.json")
     if naspi:
         rows = [r for r in naspi["plants"] if r.get("H_s") is not None]
@@ -43,10 +46,12 @@ def block() -> str:
         med = (errs[(len(errs) - 1) // 2] + errs[len(errs) // 2]) / 2
         false_id = sum(r["verdict"] == "identified" and abs(r["H_error_percent"]) > 10 for r in rows)
         verdicts = ", ".join(f"{v} {n}" for v, n in _count(r["verdict"] for r in rows).items())
+        good = [r for r in rows if abs(r["H_error_percent"]) <= 5]
         out.append(
             f"- **NASPI 2021 contest, case 1** (`experiments/naspi_osl_case1/results.md`): {len(rows)} "
             f"plants of the WECC 240-bus model against the .dyr aggregate: median |H error| {med:.1f} %; "
-            f"verdicts: {verdicts}; `identified` with an error above 10 %: {false_id}.")
+            f"verdicts: {verdicts}; `identified` with an error above 10 %: {false_id}; of the "
+            f"{len(good)} plants within 5 %, {sum(r['verdict'] == 'identified' for r in good)} are `identified`.")
     isone = load("experiments/isone_real/results.json")
     if isone:
         parts = [f"{e['name']} H {e['H_s']:.2f} s ({e['verdict']}), replay I_t/P_t sMAPE "
@@ -73,7 +78,13 @@ def block() -> str:
                      f"({v['gen_samples_per_s'] / joint['gen_samples_per_s']:.2f}x the joint UKF), median a2 "
                      f"error {v['a2_error_percent_median_abs']:.3f} %")
         out.append(line + f". Peak memory {tb['peak_rss_gib_1h_x1024']:.2f} GiB for 1 h x 1024 "
-                   "configurations.")
+                   f"configurations, {tb['peak_rss_gib_24h_chunked']:.2f} GiB for a 24 h recording streamed.")
+        fs = tb.get("fleet_scaling")
+        if fs:
+            out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "
+                       "per unit, compile included): " + "; ".join(
+                           f"{k} unit(s) {v['wall_s']:.1f} s ({v['per_unit_s']:.3f} s per unit)"
+                           for k, v in fs.items()) + ".\n\n  ![fleet scaling](benchmarks/fleet_scaling.png)")
     read = load("benchmarks/read_24h.json")
     if read:
         out.append(f"- **Reading** a 24 h, 50 frames/s CSV (`benchmarks/read_24h.py`): "

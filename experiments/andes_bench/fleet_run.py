@@ -36,7 +36,10 @@ def main():
                 for u in jd.fleet(toml, Path(tmp) / f"{case}_{event}", stream=sys.stderr):
                     rows.append({"case": case, "event": event, "unit": u["name"], "H_s": u["H_s"],
                                  "H_ci95": u["H_ci95"], "H_reference_s": u["H_reference_s"],
-                                 "H_error_percent": u["H_error_percent"], "verdict": u["verdict"]})
+                                 "H_error_percent": u["H_error_percent"], "verdict": u["verdict"],
+                                 "passes_windows": u["criteria"]["event_windows"]["pass"],
+                                 "window_reasons": u["criteria"]["event_windows"]["reasons"],
+                                 "rms_percent_mbase": u["playback_rms_percent_mbase"]})
     errs = np.array([abs(r["H_error_percent"]) for r in rows])
     res = {"event_within_5pct_fraction": float(np.mean(errs <= 5)), "units": len(rows),
            "median_abs_H_error_percent": float(np.median(errs)),
@@ -51,11 +54,16 @@ def main():
              f"- H within 5 % of the .dyr for {100 * res['event_within_5pct_fraction']:.1f} % of {len(rows)} "
              f"machine-recordings; median |H error| {res['median_abs_H_error_percent']:.1f} %; "
              f"`identified` with an error above 10 %: {res['false_identified']}.", "",
-             "| case | event | unit | H [s] | 95 % interval [s] | H .dyr [s] | error [%] | verdict |",
-             "|---|---|---|---|---|---|---|---|"]
+             f"- The 3rd-order replay passes the event-window criteria (`[criteria]`: peak deviation, dominant "
+             f"mode, RMS error of P and Q in % of MBASE, by window) for {sum(r['passes_windows'] for r in rows)} "
+             f"of {len(rows)}; the reasons of the others are in the last column.", "",
+             "| case | event | unit | H [s] | 95 % interval [s] | H .dyr [s] | error [%] | verdict | "
+             "RMS P / Q [% MBASE] | playback by window |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     lines += [f"| {r['case']} | {r['event']} | {r['unit']} | {r['H_s']:.3f} | {r['H_ci95'][0]:.3f}-"
               f"{r['H_ci95'][1]:.3f} | {r['H_reference_s']:.3f} | {r['H_error_percent']:+.1f} | "
-              f"{r['verdict']} |"
+              f"{r['verdict']} | {r['rms_percent_mbase']['P_t']:.2f} / {r['rms_percent_mbase']['Q_t']:.2f} | "
+              + ("pass" if r["passes_windows"] else "fail: " + "; ".join(r["window_reasons"])) + " |"
               for r in rows]
     (HERE / "fleet_results.md").write_text("\n".join(lines) + "\n")
     print(f"[fleet] wrote {HERE}/fleet_results.md", file=sys.stderr)

@@ -8,6 +8,9 @@ The public API is flat; the code lives in private subpackages by pipeline layer:
 """
 
 from ._version import __version__ as __version__  # isort: skip  (first: the app reads it)
+from ._app.demo import demo_scenarios as demo_scenarios
+from ._app.fleet import fleet as fleet
+from ._app.run import run_config as run_config
 from ._core.assess import Assessment as Assessment
 from ._core.assess import assess as assess
 from ._core.drem import ObserverConfig as ObserverConfig

@@ -206,3 +206,4 @@ def test_criteria_are_plain_fields_a_toml_table_can_fill():
     assert c.max_peak_ratio == 2.0 and c.event_s == 8.0 and c.pre_s == WindowCriteria().pre_s
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.pre_s = 1.0
+

@@ -27,7 +27,7 @@ from .._core.verdict import NOTES
 from .._io.errors import InputError
 from .._io.measurement import condition
 from .._io.readers import load_table
-from .._many.runner import Unit, assess_units, bucket
+from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
 from .fleet_file import Fleet, FleetPlant, load_fleet
 from .fleet_report import write_report
@@ -59,7 +59,7 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     if unknown:
         print(f"jaxdse: note: {fleet.dyr.source}: models read but not used: {', '.join(unknown)}",
               file=stream)
-    progress = Progress(2 * len(fleet.plants) + 1, stream)
+    progress = Progress(2 * len(fleet.plants) + 1, stream)  # reads, calls (set below), units
     units, skipped, first_error = [], list(fleet.skipped), None
     for p in fleet.plants:
         spec = p.run.measurement
@@ -81,7 +81,9 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
                                    playback_integrator=_capped(fleet.settings.playback_integrator))
     # One padded length for the whole fleet (the longest recording's): one compilation.
     size = bucket(max(int(np.shape(u[1].t_s)[0]) for u in units))
-    assessed = assess_units([Unit(p.name, rec, p.run.plant, t0) for p, rec, t0, _ in units], fleet.observer,
+    work = [Unit(p.name, rec, p.run.plant, t0) for p, rec, t0, _ in units]
+    progress.total = len(fleet.plants) + planned_calls(work, fleet.identify, size) + len(units)
+    assessed = assess_units(work, fleet.observer,
                             settings, fleet.identify, fleet.verdict, size=size,
                             progress=lambda line: progress.step(f"assessed {line}"))
     entries, traces = [], {}

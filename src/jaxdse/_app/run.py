@@ -19,7 +19,7 @@ from .._io.config import RunConfig
 from .._io.errors import InputError
 from .._io.measurement import read_measurement
 from .._many.batch import estimate_batch
-from .._many.runner import Unit, assess_units
+from .._many.runner import Unit, assess_units, planned_calls
 from .._many.sweep import sweep_configs
 from .._many.tune import TUNABLE, TUNE_SETTINGS, config_values, tune
 from .._version import __version__
@@ -45,7 +45,7 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
                               g.a2_reference))
             gens.append(g)
             qualities.append(quality)
-    progress = Progress(len(cfg.generators) + len(units), stream)
+    progress = Progress(len(cfg.generators) + planned_calls(units, cfg.identify) + len(units), stream)
     for g in cfg.generators:
         progress.step(f"read {g.name}")
     settings = dataclasses.replace(cfg.settings, keep="trajectories")

@@ -101,6 +101,11 @@ def playback_governor(plant: Plant, settings: Settings):
     return None if settings.external_tm else plant.governor
 
 
+EQUILIBRIUM_S = 1.0
+"""The replay starts at the equilibrium of the first second's power flow (its speed and E'q
+the means over it), not at the first frame's noisy derivative."""
+
+
 class Replay(eqx.Module):
     """The event playback with given parameters: scores against the measurements, trajectory."""
 
@@ -132,7 +137,8 @@ def replay_front(ts, fe: FrontEnd, t_ref, t_m0, plant: Plant, a1, a2, settings: 
     dt = ts[1] - ts[0]
     plant = scaled_governor(plant, t_m0, governor_gain_error, t_m_offset)
     pb_in, y0, measured = playback_inputs(fe, None, fe.alg.delta_rad[0], t_ref, plant,
-                                          dataclasses.replace(settings, external_tm=False), dt)
+                                          dataclasses.replace(settings, external_tm=False), dt,
+                                          equilibrium_s=EQUILIBRIUM_S)
     pb = playback(ts, pb_in, y0, a1, a2, plant.machine, settings.playback_integrator, plant.governor,
                   t_ref, measured=measured, n_valid=fe.n, block=settings.block_samples,
                   save_trajectory=True)

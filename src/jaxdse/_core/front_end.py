@@ -106,15 +106,33 @@ def reference_torque(ts, fe: FrontEnd, gov: AbstractGovernor, settings: Settings
     return jnp.sum(jnp.where(qss, ref, 0.0)) / jnp.maximum(jnp.sum(qss), 1)
 
 
-def playback_inputs(fe: FrontEnd, t_m, delta0, t_ref, plant: Plant, settings: Settings, dt):
-    """Inputs, initial state and measured outputs (x2, I_t, P_t, Q_t) of the event playback."""
+def playback_inputs(fe: FrontEnd, t_m, delta0, t_ref, plant: Plant, settings: Settings, dt,
+                    equilibrium_s: float = 0.0):
+    """Inputs, initial state and measured outputs (x2, I_t, P_t, Q_t) of the event playback.
+
+    ``equilibrium_s`` > 0 starts the machine at the equilibrium of the first frames' power flow:
+    the load angle, the speed deviation and E'q are their means over the first
+    ``equilibrium_s`` [s] (a single frame carries the noise and the derivative's edge), the
+    governor at its steady state there.
+    """
     m = plant.machine
     e_f = estimate_field_voltage(fe.alg.e_q1_pu, fe.alg.i_d_pu, dt, m,
                                  settings.derivative_half_width, fe.n)
+    x2_0, e_q1_0 = fe.x2_meas[0], fe.alg.e_q1_pu[0]
+    if equilibrium_s > 0:
+        first = fe.valid & (jnp.arange(fe.valid.shape[0]) * dt < equilibrium_s)
+        count = jnp.maximum(jnp.sum(first), 1)
+
+        def mean(x):
+            return jnp.sum(jnp.where(first, x, 0.0)) / count
+
+        x2_0, e_q1_0 = mean(fe.x2_meas), mean(fe.alg.e_q1_pu)
+        # the rotor's angle to the terminal voltage (the load angle) of the first frames
+        delta0 = fe.theta_t[0] + mean(fe.alg.delta_rad - fe.theta_t)
     inputs = PlaybackInputs(jnp.abs(fe.v_t), fe.theta_t - delta0, e_f, t_m, fe.dw)
-    y0 = jnp.stack([0.0 * delta0, fe.x2_meas[0], fe.alg.e_q1_pu[0]])
+    y0 = jnp.stack([0.0 * delta0, x2_0, e_q1_0])
     if not settings.external_tm:
-        y0 = jnp.concatenate([y0, plant.governor.steady_state(t_ref, fe.dw[0])])
+        y0 = jnp.concatenate([y0, plant.governor.steady_state(t_ref, x2_0 / m.omega_s)])
     s_t = fe.v_t * jnp.conj(fe.i_t)
     return inputs, y0, (fe.x2_meas, jnp.abs(fe.i_t), jnp.real(s_t), jnp.imag(s_t))
 

@@ -76,6 +76,16 @@ def units_per_call(samples: int, identify_settings: IdentifySettings | None, uni
     return int(max(1, min(units, CHUNK_BYTES // (samples * fronts * BYTES_PER_SAMPLE))))
 
 
+def planned_calls(units: Sequence[Unit], identify_settings: IdentifySettings | None, size: int | None = None,
+                  chunk: int | None = None) -> int:
+    """How many compiled calls :func:`assess_units` makes (for a progress bar's length)."""
+    total = 0
+    for (length, _, _), members in group_units(units, size).items():
+        step = chunk or units_per_call(length, identify_settings, len(members))
+        total += -(-len(members) // step)
+    return total
+
+
 @eqx.filter_jit
 def _assess_chunk(recs, plants, refs, config, settings, identify_settings, verdict_settings):
     return jax.vmap(lambda r, p, a: assess(r, p, config, settings, identify_settings, verdict_settings, a))(
