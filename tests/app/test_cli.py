@@ -34,7 +34,7 @@ def test_figures_have_labelled_axes_with_units(ambient, plant, estimate_jit, tmp
     import matplotlib.pyplot as plt
 
     import jaxdse as jd
-    from jaxdse import plot_estimates
+    from jaxdse._app.report import plot_estimates
 
     est = estimate_jit(ambient.recording, plant, jd.ObserverConfig())
     labels = []

@@ -14,7 +14,7 @@ from jaxdse._app.cli import main
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def config(extra: str = "") -> str:
+def config_text(extra: str = "") -> str:
     """The run config of these tests: kV (ph-ph) and A, figures off."""
     return run_toml(extra=f'voltage_unit = "kV_LL"\ncurrent_unit = "A"\n{extra}', output="figures = false")
 
@@ -27,7 +27,7 @@ def base_columns(pmu25):
 
 def run(tmp_path, columns, extra="", config=None, capsys=None):
     jd.write_csv(tmp_path / "pmu.csv", columns)
-    (tmp_path / "c.toml").write_text(config if config is not None else config(extra))
+    (tmp_path / "c.toml").write_text(config if config is not None else config_text(extra))
     rc = main(["run", str(tmp_path / "c.toml"), "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err if capsys else ""
     summary = (json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -65,14 +65,14 @@ def test_missing_column(tmp_path, base_columns, capsys):
 
 
 def test_wrong_unit_string(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=config("").replace('"kV_LL"', '"kW"'),
+    rc, err, _ = run(tmp_path, base_columns, config=config_text("").replace('"kV_LL"', '"kW"'),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "c.toml" in line and "measurement.voltage_unit" in line and "'kW'" in line
 
 
 def test_unit_off_by_1000_is_caught(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=config("").replace('"kV_LL"', '"V_LL"'),
+    rc, err, _ = run(tmp_path, base_columns, config=config_text("").replace('"kV_LL"', '"V_LL"'),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "pmu.csv" in line and "'VM'" in line and "voltage_unit" in line
@@ -171,7 +171,7 @@ def test_malformed_toml(tmp_path, base_columns, capsys):
 
 
 def test_unknown_key(tmp_path, base_columns, capsys):
-    rc, err, _ = run(tmp_path, base_columns, config=config("v_base_kw = 3"),
+    rc, err, _ = run(tmp_path, base_columns, config=config_text("v_base_kw = 3"),
                      capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and "key 'measurement.v_base_kw'" in line and "v_base_kv" in line
@@ -184,7 +184,7 @@ def test_unknown_key(tmp_path, base_columns, capsys):
     ("observer", "gamma1", 0, "must be > 0"),
 ])
 def test_impossible_values_name_the_key(tmp_path, base_columns, capsys, section, key, value, words):
-    cfg = config("") + f"\n[{section}]\n{key} = {value}\n"
+    cfg = config_text("") + f"\n[{section}]\n{key} = {value}\n"
     rc, err, _ = run(tmp_path, base_columns, config=cfg, capsys=capsys)
     line = one_line_error(err)
     assert rc == 2 and f"key '{section}.{key}'" in line and words in line
@@ -194,7 +194,7 @@ def test_file_that_does_not_exist(tmp_path, capsys):
     rc = main(["run", str(tmp_path / "nope.toml")])
     line = one_line_error(capsys.readouterr().err)
     assert rc == 2 and "nope.toml" in line and "does not exist" in line
-    (tmp_path / "c.toml").write_text(config(""))
+    (tmp_path / "c.toml").write_text(config_text(""))
     rc = main(["run", str(tmp_path / "c.toml")])
     line = one_line_error(capsys.readouterr().err)
     assert rc == 2 and "pmu.csv" in line and "does not exist" in line

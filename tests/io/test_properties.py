@@ -85,7 +85,8 @@ def test_readers_never_return_garbage(base, d):
         assert quality["duplicate_timestamps_dropped"] > 0
 
 
-@settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=12, deadline=None, derandomize=True,  # the same 12 damages every run
+          suppress_health_check=[HealthCheck.function_scoped_fixture])
 @given(d=damage)
 def test_estimator_never_returns_an_unflagged_nan(base, plant, estimate_jit, d):
     spec, columns = base
