@@ -427,6 +427,9 @@ def main() -> None:
     elif not args.quick:
         measure_memory(res)
 
+    if not args.quick and (HERE / "results.json").exists():  # benchmarks/fleet_scaling.py's own figures
+        old = json.loads((HERE / "results.json").read_text())
+        res.update({k: v for k, v in old.items() if k.startswith("fleet_scaling")})
     (HERE / ("results_quick.json" if args.quick else "results.json")).write_text(json.dumps(res, indent=2))
     write_table(res, HERE / ("results_quick.md" if args.quick else "results.md"))
 

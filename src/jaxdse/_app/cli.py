@@ -296,24 +296,6 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _compilation_cache(jax) -> None:
-    """Keep compiled pipelines between runs (the first run of a shape compiles for ~10-30 s):
-    JAX's persistent cache in ``$JAX_COMPILATION_CACHE_DIR``, else ``$XDG_CACHE_HOME/jaxdse``
-    (``~/.cache/jaxdse``). ``JAXDSE_NO_CACHE=1`` turns it off."""
-    import os
-
-    if os.environ.get("JAXDSE_NO_CACHE") or jax.config.jax_compilation_cache_dir:
-        return
-    root = os.environ.get("JAX_COMPILATION_CACHE_DIR") or os.path.join(
-        os.environ.get("XDG_CACHE_HOME") or os.path.expanduser("~/.cache"), "jaxdse", "xla")
-    try:
-        os.makedirs(root, exist_ok=True)
-    except OSError:
-        return  # a read-only home: run without the cache
-    jax.config.update("jax_compilation_cache_dir", root)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-
-
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
@@ -323,7 +305,6 @@ def main(argv=None) -> int:
     import jax
 
     jax.config.update("jax_enable_x64", True)  # every command computes in float64
-    _compilation_cache(jax)
     from .._io.errors import InputError
 
     try:
