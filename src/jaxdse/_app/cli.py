@@ -48,10 +48,10 @@ run the algebraic observer, the governor model and the paper's online DREM/I&I e
 then identify H and D from the whole recording at once (with 95 % intervals), play the
 event back with them, and give a verdict per parameter. The unit's headline is H's:
 
-  identified          H within +-10 % at 95 % confidence, and H stays inside that interval
-                      with D fixed at 0 and without the governor correction
-  weakly identified   interval wider than +-10 %, or H rests on the fitted D or on
-                      correcting the governor model (the reason says which)
+  identified          H within +-10 % at 95 % confidence, D not negative, and H stays inside
+                      that interval with D fixed at 0 and without the governor correction
+  weakly identified   interval wider than +-10 %, D < 0 with confidence, or H rests on the
+                      fitted D or on correcting the governor model (the reason says which)
   not identified      the data do not tell H apart (interval too wide or unbounded)
   failed              offline, a solver failure, H <= 0 or a diverging playback
 

@@ -84,13 +84,6 @@ PARAMETERS = ("a1", "a2", "c", "g")
 """Coefficients of the regression: damping, inertia, torque offset, governor gain error."""
 
 
-SPREAD_MAX_NOISE = 0.25
-"""Largest relative 95 % noise half width [-] (sandwich) of a refit with a slower or faster
-filter for its change of a2 to count in the filter spread. On NASPI OSL case 1 the slow
-filter's refits of the good plants had half widths of 60-1500 % (no information), those of
-the ANDES bench's machines, whose spread is real model error, a few %."""
-
-
 class IdentifySettings(eqx.Module):
     """Static choices of :func:`identify` (never differentiated or vmapped)."""
 
@@ -165,10 +158,8 @@ class Identified(eqx.Module):
     """The part from the measurement noise: 1.96 se_a2 / a2 [-]."""
     filter_spread: Float[Array, ""]
     """Largest relative change of a2 when the filter F is made slower or faster
-    (``IdentifySettings.spread_scales``) [-], over the refits that see the event (their own
-    95 % noise half width within ``SPREAD_MAX_NOISE``).
-    Were the model right, every filter would find the same a2 up to noise; a spread is model
-    error (a 6th-order machine, a governor model that is off), which the
+    (``IdentifySettings.spread_scales``) [-]. Were the model right, every filter would find
+    the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model that is off), which the
     residual's variance does not show."""
     information: Float[Array, "4 4"]
     """Information matrix of (a1, a2, c, g), scaled to unit diagonal [-]; its condition number
@@ -241,19 +232,10 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     normal, rhs = design.T @ (design * weights[:, None]), design.T @ (weights * z)
     a2_without = jnp.stack([_fit_without(normal, rhs, j)[1] for j in (0, 3)])
     cov, info = _sandwich(design * (weights * resid)[:, None], (design * slope[:, None]).T @ design, window)
-    if s.spread_scales:
-        def other(disc):  # each filter's own Huber fit, and the noise part of its a2 (sandwich)
-            x, _, (th, w, sl, r) = fit(disc, signals)
-            cov_k = _sandwich(x * (w * r)[:, None], (x * sl[:, None]).T @ x, window)[0]
-            return th[1], Z95 * jnp.sqrt(jnp.maximum(cov_k[1, 1], 0.0))
-
-        a2_k, half_k = jax.vmap(other)(
+    if s.spread_scales:  # each filter's own Huber fit (its own weights: the same weights shift a2)
+        others = jax.vmap(lambda d: fit(d, signals)[2][0][1])(
             jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(filters[k] for k in s.spread_scales)))
-        # A filter that sees almost nothing says nothing: a slow filter on a short recording of
-        # small swings moves a2 by hundreds of % with an interval wider still. Such a fit (its
-        # own 95 % half width beyond SPREAD_MAX_NOISE) is left out; the others count in full.
-        seen = half_k <= SPREAD_MAX_NOISE * jnp.abs(a2_k)
-        spread = jnp.max(jnp.where(seen, jnp.abs(a2_k / theta[1] - 1.0), 0.0))
+        spread = jnp.max(jnp.abs(others / theta[1] - 1.0))
     else:
         spread = jnp.zeros((), ts.dtype)
     levels = noise_levels(recording, fe.valid)

@@ -9,7 +9,7 @@ governor correction get their own verdicts, with the model-structure findings in
 3rd-order model lumps the excitation and stabiliser damping into D; a governor response far
 from the .dyr model's). The unit's headline is H's verdict, because H is what the fleet report
 files. A unit is never ``identified`` when H's interval is wider than ``identified_ci``
-(+-10 %), when H <= 0, or when its playback diverges.
+(+-10 %), when H <= 0, when D < 0 with confidence, or when its playback diverges.
 
 The verdicts are computed in JAX (integers and a bit set of reasons, so that they vmap over a
 fleet) and spelled out at the edge (:func:`describe`).
@@ -57,9 +57,12 @@ REASONS = {
 _BIT = {name: 1 << k for k, name in enumerate(REASONS)}
 _FAILED = ("offline", "solver", "not_finite", "h_not_positive", "playback_diverged")
 _NOT_IDENTIFIED = ("interval_very_wide",)
-_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor")
-FINDINGS = ("negative_damping", "d_interval_wide", "governor_model_off")
-"""Reasons about D and the governor correction: they set those parameters' verdicts, not H's."""
+_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor", "negative_damping")
+FINDINGS = ("d_interval_wide", "governor_model_off")
+"""Reasons about D and the governor correction that set those parameters' verdicts, not H's.
+``negative_damping`` sets D's verdict and also keeps H from ``identified``: on the ANDES
+fleets (noise-free, .dyr plants) the one unit 14 % off with a +-8 % interval had D < 0 with
+confidence and nothing else against it."""
 NOTES = ("drem_contradicts", "drem_disagrees", "drem_not_converged") + FINDINGS
 """Reasons that do not set the headline (H's) verdict. The online DREM/I&I estimate uses a
 fraction of the recording's information (it adapts slowly, from its start); whether it
