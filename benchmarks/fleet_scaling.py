@@ -18,8 +18,8 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import json
-import platform
 import os
+import platform
 import time
 from pathlib import Path
 

@@ -39,8 +39,8 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
-from jax.flatten_util import ravel_pytree  # noqa: E402
 import numpy as np  # noqa: E402
+from jax.flatten_util import ravel_pytree  # noqa: E402
 from numpy_reference import observer_loop  # noqa: E402  (beside this script)
 
 import jaxdse as jd  # noqa: E402
@@ -400,7 +400,8 @@ def main() -> None:
                   for k in range(0, b, IDENTIFY_CHUNK)]
 
         def fn(one=one, chunks=chunks):
-            return jax.tree_util.tree_map(lambda *x: np.concatenate(x), *[jax.device_get(one(c)) for c in chunks])
+            parts = [jax.device_get(one(c)) for c in chunks]
+            return jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
 
         first, best, out = timed(fn, repeat=1)
         a2_out = out if name == "point estimate" else out[0]

@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from builders import COLS, run_toml
 
 import jaxdse as jd
-from builders import COLS, run_toml
 from jaxdse._app.cli import main
 
 pytestmark = pytest.mark.slow

@@ -16,9 +16,9 @@ import sys
 
 import numpy as np
 import pytest
+from builders import COLS, generator_toml, run_toml
 
 import jaxdse as jd
-from builders import COLS, generator_toml, run_toml
 
 pytestmark = pytest.mark.slow
 

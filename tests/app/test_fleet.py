@@ -2,7 +2,6 @@
 
 import dataclasses
 import json
-import sys
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -115,8 +114,9 @@ columns = {time = "time_s", v_mag = "B2_G1/VM", v_ang = "B2_G1/VA", i_mag = "B2_
 def test_criteria_and_identify_typed_from_fields(tmp_path):
     text = (BENCH / "fleet_ieee14.toml").read_text().replace('"data/', f'"{BENCH}/data/')
     cfg = tmp_path / "fleet.toml"
-    cfg.write_text(text + "\n[criteria]\nmax_rms_percent_mbase_q = 7\n\n[identify]\nnoise_interval = \"sandwich\"\n"
-                   "bootstrap_draws = 0\noutput_error = true\nspread_scales = [0.5, 2.0]\n")
+    cfg.write_text(text + "\n[criteria]\nmax_rms_percent_mbase_q = 7\n\n[identify]\n"
+                   "noise_interval = \"sandwich\"\nbootstrap_draws = 0\noutput_error = true\n"
+                   "spread_scales = [0.5, 2.0]\n")
     fl = load_fleet(cfg)
     assert fl.criteria["max_rms_percent_mbase_q"] == 7.0 and fl.criteria["max_interval_percent"] == 10.0
     assert fl.identify.bootstrap_draws == 0 and fl.identify.output_error is True

@@ -5,10 +5,9 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxdse as jd
-from jaxdse._core.integrate import Trapezoid
 from jaxdse._core import drem
 from jaxdse._core.drem import _filter3_rhs, _hd_rhs
-from jaxdse._core.integrate import integrate_sampled
+from jaxdse._core.integrate import Trapezoid, integrate_sampled
 
 TIGHT = jd.Integrator(rtol=1e-12, atol=1e-14, max_substeps=4096)
 

@@ -3,9 +3,14 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.mapping import map_to_measurement
-from jaxdse._core.mapping import map_to_terminal
-from jaxdse._core.mapping import line_to_grid, line_to_plant, transformer_to_hv, transformer_to_lv
+from jaxdse._core.mapping import (
+    line_to_grid,
+    line_to_plant,
+    map_to_measurement,
+    map_to_terminal,
+    transformer_to_hv,
+    transformer_to_lv,
+)
 
 
 def _random_phasors(rng, n=200):

@@ -6,8 +6,7 @@ import numpy as np
 from numpy_reference import observer_loop  # benchmarks/ (pytest pythonpath)
 
 import jaxdse as jd
-from jaxdse._core.drem import run_observer
-from jaxdse._core.drem import DremInputs
+from jaxdse._core.drem import DremInputs, run_observer
 from jaxdse._core.front_end import front_end, reference_torque
 
 

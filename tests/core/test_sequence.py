@@ -2,8 +2,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import jaxdse as jd
-from jaxdse._core.sequence import positive_sequence
-from jaxdse._core.sequence import phases_from_sequences, sequence_components
+from jaxdse._core.sequence import phases_from_sequences, positive_sequence, sequence_components
 
 
 def test_fortescue_round_trip(rng):

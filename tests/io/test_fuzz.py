@@ -15,11 +15,11 @@ from collections import Counter
 
 import numpy as np
 import pytest
+from builders import COLS, run_toml
 from hypothesis import HealthCheck, Phase, event, given, settings
 from hypothesis import strategies as st
 
 import jaxdse as jd
-from builders import COLS, run_toml
 from jaxdse._app.cli import main
 
 PHASES = (Phase.explicit, Phase.generate, Phase.shrink)
@@ -111,7 +111,8 @@ class Files:
     def write(self, cols, extra=""):
         k = next(self.count)
         jd.write_csv(self.root / f"pmu{k}.csv", cols)
-        (self.root / f"c{k}.toml").write_text(run_toml(f"pmu{k}.csv", extra='on_long_gap = "error"\n' + extra))
+        config = run_toml(f"pmu{k}.csv", extra='on_long_gap = "error"\n' + extra)
+        (self.root / f"c{k}.toml").write_text(config)
         return self.root / f"pmu{k}.csv", self.root / f"c{k}.toml"
 
 

@@ -12,9 +12,9 @@ import pytest
 
 import jaxdse as jd
 from jaxdse import sweep_configs, tuning_loss
+from jaxdse._app.cli import main
 from jaxdse._core.tuning import TUNABLE
 from jaxdse._many.tune import from_log, to_log
-from jaxdse._app.cli import main
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 

@@ -31,10 +31,10 @@ from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
 from .fleet_file import Fleet, FleetPlant, load_fleet
 from .fleet_report import write_report
-from .windows import WindowCriteria, window_scores
 from .progress import Progress
 from .report import summary_entry
 from .run import module_values, settings_values, sha256
+from .windows import WindowCriteria, window_scores
 
 MAX_SUBSTEPS = 24
 """Adaptive playback steps per sample before a playback counts as diverged. Under vmap every
@@ -129,8 +129,8 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict) -> 
     half = ident_info.get("relative_ci_percent")
     smape = e["smape_percent"]
     traces = _traces(a.estimate, a.replay)
-    scores = window_scores(traces["time_s"], {k: traces[k][0] for k in WINDOW_CHANNELS},
-                           {k: traces[k][1] for k in WINDOW_CHANNELS}, _channel_scale(p), window_criteria(criteria))
+    measured, replayed = ({k: traces[k][j] for k in WINDOW_CHANNELS} for j in (0, 1))
+    scores = window_scores(traces["time_s"], measured, replayed, _channel_scale(p), window_criteria(criteria))
     checks = {
         "interval": _check(half, criteria["max_interval_percent"], "half width of H's 95 % interval [%]"),
         "event_windows": {"what": "playback by window (peak deviation, dominant mode, RMS error; P and Q)",

@@ -111,7 +111,8 @@ def plot_playback(e: dict, tr: dict, path: Path) -> None:
     labels = {"x2": "speed deviation x2 [rad/s]", "I_t": "I_t [pu]", "P_t": "P_t [pu]", "Q_t": "Q_t [pu]"}
     pw = e["playback_windows"]
     t_event = pw["onset_s"]
-    event_s = (pw["windows"]["event"][1] - pw["windows"]["event"][0]) * (t[1] - t[0]) if pw["windows"] else 0.0
+    event = pw["windows"]["event"] if pw["windows"] else (0, 0)
+    event_s = (event[1] - event[0]) * (t[1] - t[0])
     for ax, k in zip(axes, labels):
         meas, sim = tr[k]
         ax.plot(t, meas, lw=0.8, color="k", label="measured")
@@ -290,7 +291,8 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     pw = e["playback_windows"]
     win_rows = "".join(
         f"<tr><td>{sc['window']}</td><td>{sc['channel']}</td>"
-        f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td><td>{_f(sc['peak_deviation_simulated'], '.3g')}</td>"
+        f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td>"
+        f"<td>{_f(sc['peak_deviation_simulated'], '.3g')}</td>"
         f"<td>{_f(sc['rms_error'], '.3g')}</td><td>{_f(sc['aligned_rms_error'], '.3g')} "
         f"({_f(sc['shift_s'], '+.2f')} s)</td>"
         f"<td>{_mode(sc['mode_measured'])}</td><td>{_mode(sc['mode_simulated'])}</td></tr>"

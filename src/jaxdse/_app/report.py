@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .._core.estimate import Replay
 from .._core.assess import Assessment
+from .._core.estimate import Replay
 from .._core.identify import Identified, condition_number
 from .._core.result import Estimate
 from .._core.verdict import NOTES, REASONS, VERDICTS, describe, online_verdict
@@ -49,7 +49,8 @@ def _pair(x):
     return [_num(x[0]), _num(x[1])]
 
 
-def summary_entry(name: str, assessment: Assessment | Estimate, a2_reference=None, h_reference_s=None) -> dict:
+def summary_entry(name: str, assessment: Assessment | Estimate, a2_reference=None,
+                  h_reference_s=None) -> dict:
     """One entry of ``summary.json["recordings"]``: a serialiser of one unit's :class:`Assessment`
     (an :class:`Estimate` alone counts as an assessment without identification).
 
@@ -134,7 +135,8 @@ def _reason_text(key: str, ident, online: dict) -> str:
         return (f"D = {float(ident.d_pu_s):.3g} < 0 with 95 % confidence: the 3rd-order model lumps the "
                 "excitation and stabiliser damping into D")
     if key in ("h_rests_on_damping", "h_rests_on_governor") and ident is not None:
-        alt = ident.h_without_damping_s if key == "h_rests_on_damping" else ident.h_without_governor_correction_s
+        alt = (ident.h_without_damping_s if key == "h_rests_on_damping"
+               else ident.h_without_governor_correction_s)
         lo, hi = (float(x) for x in ident.h_ci95)
         return f"{REASONS[key]} (H = {float(alt):.3g} s against the interval {lo:.3g}-{hi:.3g} s)"
     if key == "drem_not_converged" and online.get("not_converged_reason"):

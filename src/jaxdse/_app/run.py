@@ -10,7 +10,6 @@ import time
 from pathlib import Path
 
 import equinox as eqx
-import jax
 import numpy as np
 
 from .._core.settings import Settings
@@ -25,6 +24,7 @@ from .._many.tune import TUNABLE, TUNE_SETTINGS, config_values, tune
 from .._version import __version__
 from .progress import Progress
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
+
 
 def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:
     """Estimate every generator of ``cfg``; write summary.json, CSVs and figures; return the summary.

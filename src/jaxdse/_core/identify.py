@@ -159,8 +159,8 @@ class Identified(eqx.Module):
     filter_spread: Float[Array, ""]
     """Largest relative change of a2 when the filter F is made slower or faster
     (``IdentifySettings.spread_scales``) [-]. Were the model right, every filter would find
-    the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model that is off), which the
-    residual's variance does not show."""
+    the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model
+    that is off), which the residual's variance does not show."""
     information: Float[Array, "4 4"]
     """Information matrix of (a1, a2, c, g), scaled to unit diagonal [-]; its condition number
     (:func:`condition_number`, on the host) tells whether a2 is separable from the others."""
@@ -336,8 +336,8 @@ def _output_error(ts, fe: FrontEnd, t_ref, plant: Plant, settings: Settings, s: 
     theta = jnp.stack([p[0], a2, a2 * p[2], a2 * p[3]])
     converged = (sol.result == optx.RESULTS.successful) & usable
     # The alternatives stay the equation error's (H = ws / 2 a2 is its own inverse map).
-    a2_without = inertia_from_a2(jnp.stack([start.h_without_damping_s, start.h_without_governor_correction_s]),
-                                 w_s)
+    h_without = jnp.stack([start.h_without_damping_s, start.h_without_governor_correction_s])
+    a2_without = inertia_from_a2(h_without, w_s)
     return _result(theta, to_theta @ cov_p @ to_theta.T, info, w_s, jnp.sum(valid), spread, levels,
                    converged, s.model_error, t_ref, start.t_m0_pu, a2_without)
 

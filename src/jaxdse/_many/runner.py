@@ -119,8 +119,8 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
         for start in range(0, len(members), step):
             # A short last chunk repeats its last member: one compiled shape per group.
             idx = np.minimum(np.arange(start, start + step), len(members) - 1)
-            res = _assess_chunk(*(jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in (recs, plants, refs)),
-                                config, settings, identify_settings, verdict_settings)
+            part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in (recs, plants, refs))
+            res = _assess_chunk(*part, config, settings, identify_settings, verdict_settings)
             res = jax.device_get(res)
             for j in range(min(step, len(members) - start)):
                 u = units[members[start + j]]

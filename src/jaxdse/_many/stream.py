@@ -40,7 +40,6 @@ from .._core.result import Estimate, build_estimate
 from .._core.settings import Settings
 from .batch import pad_recording
 
-
 MIN_SLICE_SAMPLES = 8
 """The fewest samples a slice (a chunk with its halo) may have: :class:`Recording`'s minimum."""
 
