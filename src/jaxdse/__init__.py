@@ -2,9 +2,9 @@
 generators from PMU recordings (Lorenz-Meyer, Suchantke & Schiffer, arXiv:2203.14623).
 
 The public API is flat; the code lives in private subpackages by pipeline layer:
-``_io`` (files in and out), ``_core`` (one generator, one configuration), ``_many``
-(batches, streams, sweeps, tuning), ``_sim`` (the ground-truth simulator) and ``_app``
-(the command-line tool).
+``_io`` (files in and out), ``_core`` (one generator, one configuration), ``_dyr`` (the
+unit's own PSS/E models: playback, sensitivities, calibration), ``_many`` (batches, streams,
+sweeps, tuning), ``_sim`` (the ground-truth simulator) and ``_app`` (the command-line tool).
 """
 
 from ._version import __version__ as __version__  # isort: skip  (first: the app reads it)
@@ -50,6 +50,34 @@ from ._core.verdict import VERDICTS as VERDICTS
 from ._core.verdict import Verdict as Verdict
 from ._core.verdict import VerdictSettings as VerdictSettings
 from ._core.verdict import describe as describe
+from ._dyr.base import AbstractExciter as AbstractExciter
+from ._dyr.base import AbstractStabiliser as AbstractStabiliser
+from ._dyr.calibrate import Calibration as Calibration
+from ._dyr.calibrate import CalibrationSettings as CalibrationSettings
+from ._dyr.calibrate import Events as Events
+from ._dyr.calibrate import ParameterSpec as ParameterSpec
+from ._dyr.calibrate import Ranking as Ranking
+from ._dyr.calibrate import calibrate as calibrate
+from ._dyr.calibrate import measured_pq as measured_pq
+from ._dyr.calibrate import rank as rank
+from ._dyr.calibrate import stack_events as stack_events
+from ._dyr.exciter import ESDC2A as ESDC2A
+from ._dyr.exciter import ESST3A as ESST3A
+from ._dyr.exciter import EXST1 as EXST1
+from ._dyr.exciter import IEEEX1 as IEEEX1
+from ._dyr.exciter import SEXS as SEXS
+from ._dyr.machine import GENCLS as GENCLS
+from ._dyr.machine import GENROU as GENROU
+from ._dyr.machine import GENSAL as GENSAL
+from ._dyr.playback import PlaybackResult as PlaybackResult
+from ._dyr.playback import PlaybackSettings as PlaybackSettings
+from ._dyr.playback import TerminalSeries as TerminalSeries
+from ._dyr.playback import play_back as play_back
+from ._dyr.records import UnitModel as UnitModel
+from ._dyr.records import unit_model as unit_model
+from ._dyr.stabiliser import IEEEST as IEEEST
+from ._dyr.stabiliser import ST2CUT as ST2CUT
+from ._dyr.unit import DyrUnit as DyrUnit
 from ._io.config import GeneratorRun as GeneratorRun
 from ._io.config import RunConfig as RunConfig
 from ._io.config import load_config as load_config

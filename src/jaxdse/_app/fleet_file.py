@@ -27,6 +27,7 @@ from .._io.errors import InputError
 from .._io.psse import DyrData, RawCase, read_dyr, read_raw
 from .._io.readers import load_table
 from .._io.schema import (
+    build,
     identify_section,
     measurement_section,
     module_section,
@@ -37,6 +38,7 @@ from .._io.schema import (
     subtable,
     typed_value,
 )
+from .dyr_fleet import PlaybackOptions
 from .fleet_plants import Member, generator_run, governor_sets, governor_slots, plant_units
 from .windows import WindowCriteria
 
@@ -44,7 +46,7 @@ LAYOUTS = ("per_machine", "step_up_branch")
 """How plants and their columns are found from [channels] (see ``FLEET_HELP`` in the CLI)."""
 ROLES = ("time", "frequency", "v_mag", "v_ang", "i_mag", "i_ang")
 TOP = {"case", "measurement", "channels", "unit", "observer", "settings", "identify", "criteria",
-       "output"}
+       "output", "playback"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -91,6 +93,8 @@ class Fleet:
     criteria: dict
     """The :class:`Criteria`, as a dict."""
     figures: bool = True
+    playback: PlaybackOptions = PlaybackOptions()
+    """[playback]: the surrogate or the units' own .dyr models."""
     notes: tuple[str, ...] = ()
     """Records of the .raw/.dyr that were dropped or not used and belong to no plant (e.g. a
     .dyr record without a readable bus number): one line each."""
@@ -171,11 +175,15 @@ def load_fleet(path) -> Fleet:
         raise InputError(path, "no plant found: check [channels] (or [[unit]]) against the "
                          "recording's column names and the case's generators", key="channels")
     identify, verdict = identify_section(path, subtable(path, data, "identify", "identify"))
+    playback = build(path, PlaybackOptions, options(
+        path, PlaybackOptions, subtable(path, data, "playback", "playback"), "playback.", minimum=1),
+        "playback")
     return Fleet(path=path, raw=raw, dyr=dyr, plants=tuple(built), skipped=tuple(skipped),
                  observer=module_section(path, ObserverConfig,
                                          subtable(path, data, "observer", "observer"), "observer"),
                  settings=settings_section(path, subtable(path, data, "settings", "settings")),
                  identify=identify, verdict=verdict, criteria=criteria, figures=figures,
+                 playback=playback,
                  notes=tuple(_one_line(n) for n in (*raw.problems, *dyr.problems)))
 
 

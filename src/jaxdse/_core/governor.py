@@ -33,6 +33,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from .blocks import blocked as _blocked
+from .blocks import lag as _lag
+from .blocks import lead_lag as _lead_lag
+from .blocks import safe as _safe
+from .blocks import washout as _washout
 from .fields import as_float, check_nonnegative, check_positive, concrete
 
 
@@ -54,39 +59,6 @@ class AbstractGovernor(eqx.Module):
     @abc.abstractmethod
     def reference_from_steady(self, t_m, dw):
         """Torque reference T_ref that holds Tm = ``t_m`` at speed deviation ``dw`` in steady state."""
-
-
-# --- block helpers ----------------------------------------------------------------------------
-
-def _safe(t):
-    """A denominator that is ``t`` where ``t > 0`` and 1 elsewhere (bypassed blocks)."""
-    return jnp.where(t > 0, t, 1.0)
-
-
-def _lag(u, x, t):
-    """First-order lag 1/(1 + sT): (output, dx/dt). T = 0: pass-through, dx/dt = 0."""
-    on = t > 0
-    return jnp.where(on, x, u), jnp.where(on, (u - x) / _safe(t), 0.0)
-
-
-def _lead_lag(u, x, t_lead, t_lag):
-    """(1 + s t_lead)/(1 + s t_lag): (output, dx/dt). t_lag = 0: pass-through."""
-    on = t_lag > 0
-    ts = _safe(t_lag)
-    return (jnp.where(on, x + (t_lead / ts) * (u - x), u),
-            jnp.where(on, (u - x) / ts, 0.0))
-
-
-def _washout(u, x, t):
-    """s/(1 + sT) (a filtered derivative): (output, dx/dt). T = 0: output 0 (not realisable)."""
-    on = t > 0
-    d = jnp.where(on, (u - x) / _safe(t), 0.0)
-    return d, d
-
-
-def _blocked(x, dx, lo, hi):
-    """TGOV1's non-windup rule: no motion beyond a limit the state sits on."""
-    return jnp.where(((x >= hi) & (dx > 0)) | ((x <= lo) & (dx < 0)), 0.0, dx)
 
 
 def _check(module, ok: bool | np.ndarray, message: str) -> None:

@@ -1,0 +1,159 @@
+"""The .dyr playback of a fleet's plants (``[playback] model = "dyr"``).
+
+Each unit of a plant gets its own :class:`~jaxdse._dyr.unit.DyrUnit` from its records; the
+plant's terminal voltage (as the front end mapped it) is imposed on every unit, each unit
+starts from its share of the plant's measured P and Q (shares of the .raw PG and QG, or of
+MBASE where those are zero), and the plant's simulated P and Q are the sum. A plant with a
+unit whose records include a model jaxdse does not simulate plays back the surrogate, and
+its page says which record. Units of one model structure and length run in one vmapped call.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Literal
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
+from .._dyr.records import UnitModel, unit_model
+
+PLAYBACK_MODELS = ("surrogate", "dyr")
+
+
+@dataclasses.dataclass(frozen=True)
+class PlaybackOptions:
+    """[playback]: which model plays the recording back, and how it is integrated."""
+
+    model: Literal["surrogate", "dyr"] = "surrogate"
+    """"surrogate" (the 3rd-order model with estimated Ef) or "dyr" (the unit's own PSS/E
+    records: machine, exciter, stabiliser, governor; the surrogate where a record's model is
+    not simulated)."""
+    solver: Literal["tsit5", "kvaerno5"] = "tsit5"
+    """"tsit5" (explicit, fixed step) or "kvaerno5" (implicit, adaptive) for the .dyr model."""
+    substeps: int = 4
+    """Fixed steps per recording frame ("tsit5")."""
+    ke_zero: Literal["psse", "literal"] = "psse"
+    """A DC exciter's (IEEEX1, ESDC2A) KE = 0: PSS/E's self-excited rule (KE computed so that
+    VR = VRMAX/10 initially) or literally 0 (as ANDES reads it)."""
+
+    def __post_init__(self):
+        if self.model not in PLAYBACK_MODELS:
+            raise ValueError(f"model must be one of {PLAYBACK_MODELS}, got {self.model!r}")
+        if self.solver not in ("tsit5", "kvaerno5"):
+            raise ValueError(f"solver must be \"tsit5\" or \"kvaerno5\", got {self.solver!r}")
+        if self.substeps < 1:
+            raise ValueError(f"substeps must be >= 1, got {self.substeps}")
+
+    @property
+    def settings(self) -> PlaybackSettings:
+        return PlaybackSettings(solver=self.solver, substeps=self.substeps)
+
+
+@dataclasses.dataclass
+class PlantModel:
+    """The .dyr models of one plant's units, or why the plant plays back the surrogate."""
+
+    units: list[UnitModel]
+    mbase_mva: np.ndarray
+    share_p: np.ndarray
+    share_q: np.ndarray
+    fallback: str | None = None
+
+    @property
+    def models(self) -> list[dict]:
+        return [u.models for u in self.units]
+
+    @property
+    def notes(self) -> list[str]:
+        return [n for u in self.units for n in u.notes]
+
+
+def _shares(x: np.ndarray, mbase: np.ndarray) -> np.ndarray:
+    total = float(np.sum(x))
+    if np.all(np.isfinite(x)) and abs(total) > 1e-3 * float(np.sum(mbase)):
+        return x / total
+    return mbase / np.sum(mbase)
+
+
+def plant_model(raw, dyr, plant, options: PlaybackOptions = PlaybackOptions()) -> PlantModel:
+    """The :class:`PlantModel` of a fleet plant (host side)."""
+    units = [unit_model(dyr, raw, plant.bus, m.id, ke_zero=options.ke_zero) for m in plant.members]
+    gens = [raw.generator(plant.bus, m.id) for m in plant.members]
+    mbase = np.array([g.mbase_mva for g in gens])
+    out = PlantModel(units, mbase, _shares(np.array([g.pg_mw for g in gens]), mbase),
+                     _shares(np.array([g.qg_mvar for g in gens]), mbase))
+    missing = [line for u in units for line in u.missing]
+    if missing:
+        out.fallback = "surrogate played back: " + "; ".join(missing)
+    return out
+
+
+def terminal_series(t_s, v_mag, v_ang, p, q) -> TerminalSeries:
+    """A TerminalSeries from |V|, its angle (nominal frame) and P, Q out of the terminal."""
+    v_mag, v_ang, p, q = (np.asarray(a, dtype=float) for a in (v_mag, v_ang, p, q))
+    i = (p - 1j * q) * np.exp(1j * v_ang) / np.where(v_mag > 0, v_mag, 1.0)
+    return TerminalSeries(*(jnp.asarray(a) for a in (t_s, v_mag, v_ang, i.real, i.imag)))
+
+
+@eqx.filter_jit
+def _batch(units, series, settings):
+    return eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
+
+
+def _stack(trees):
+    return jax.tree.map(lambda *x: jnp.stack(x), *trees)
+
+
+@dataclasses.dataclass
+class PlantPlayback:
+    """A plant's .dyr playback on the plant base (MBASE sum)."""
+
+    p_pu: np.ndarray
+    q_pu: np.ndarray
+    x2_rad_s: np.ndarray
+    """MBASE-weighted rotor speed deviation [rad/s]."""
+    ok: bool
+
+
+def play_back_plants(jobs: dict, options: PlaybackOptions) -> dict:
+    """Play back every plant of ``jobs`` = {name: (PlantModel, TerminalSeries on the plant
+    base)}; returns {name: PlantPlayback}. Units of one structure and length share a call."""
+    flat = []
+    for name, (pm, series) in jobs.items():
+        m_total = float(np.sum(pm.mbase_mva))
+        vr = np.asarray(series.v_mag_pu) * np.cos(np.asarray(series.v_ang_rad))
+        vi = np.asarray(series.v_mag_pu) * np.sin(np.asarray(series.v_ang_rad))
+        p = vr * np.asarray(series.i_re_pu) + vi * np.asarray(series.i_im_pu)
+        q = vi * np.asarray(series.i_re_pu) - vr * np.asarray(series.i_im_pu)
+        for k, um in enumerate(pm.units):
+            scale = m_total / pm.mbase_mva[k]
+            s = terminal_series(series.t_s, series.v_mag_pu, series.v_ang_rad,
+                                p * pm.share_p[k] * scale, q * pm.share_q[k] * scale)
+            flat.append((name, k, um.unit, s))
+    groups: dict = {}
+    for item in flat:
+        key = (jax.tree_util.tree_structure(item[2]), int(item[3].t_s.shape[0]))
+        groups.setdefault(key, []).append(item)
+    results = {}
+    for items in groups.values():
+        res = _batch(_stack([it[2] for it in items]), _stack([it[3] for it in items]), options.settings)
+        for j, (name, k, _, _) in enumerate(items):
+            results[(name, k)] = jax.tree.map(lambda a, j=j: np.asarray(a[j]), res)
+    out = {}
+    for name, (pm, series) in jobs.items():
+        w = pm.mbase_mva / np.sum(pm.mbase_mva)
+        rs = [results[(name, k)] for k in range(len(pm.units))]
+        omega_s = float(pm.units[0].unit.machine.omega_s_rad_s)
+        out[name] = PlantPlayback(p_pu=sum(wk * r.p_pu for wk, r in zip(w, rs)),
+                                  q_pu=sum(wk * r.q_pu for wk, r in zip(w, rs)),
+                                  x2_rad_s=sum(wk * (r.omega_pu - 1.0) for wk, r in zip(w, rs)) * omega_s,
+                                  ok=all(bool(r.ok) for r in rs))
+    return out
+
+
+__all__ = ["PLAYBACK_MODELS", "PlantModel", "PlantPlayback", "PlaybackOptions", "plant_model",
+           "play_back_plants", "terminal_series"]

@@ -1,0 +1,103 @@
+"""Interfaces of the standard models that a unit's .dyr records compose.
+
+Conventions (all models):
+
+* per unit on the machine base (MBASE, machine kV); time in seconds; angles in radians;
+* the network frame rotates at nominal speed; a phasor ``v = v_re + j v_im`` is a pair of reals;
+* the state of a model is a 1-D float array of fixed length (``n_states``), so that units of
+  one structure stack under vmap; a model holds its parameters as array leaves and its
+  structural choices (input modes, switches) as static fields;
+* ``initial_state`` returns the steady state that holds the given operating point, and what
+  reference the model needs to stay there (Vref of an exciter); ``vector_field`` returns
+  d(state)/dt; outputs are separate methods so that the composed unit reads them in order.
+"""
+
+from __future__ import annotations
+
+import abc
+from typing import NamedTuple
+
+import equinox as eqx
+from jaxtyping import Array, Float
+
+
+class ExciterInputs(NamedTuple):
+    """What an exciter sees at one instant (machine base)."""
+
+    vt_pu: Float[Array, ""]
+    """Terminal voltage magnitude |Vt| [pu]."""
+    v_re_pu: Float[Array, ""]
+    """Terminal voltage phasor, real part [pu] (network frame)."""
+    v_im_pu: Float[Array, ""]
+    """Terminal voltage phasor, imaginary part [pu]."""
+    i_re_pu: Float[Array, ""]
+    """Terminal current phasor out of the machine, real part [pu]."""
+    i_im_pu: Float[Array, ""]
+    """Terminal current phasor out of the machine, imaginary part [pu]."""
+    ifd_pu: Float[Array, ""]
+    """Field current LadIfd [pu, non-reciprocal base: Efd = LadIfd in steady state unsaturated]."""
+    vs_pu: Float[Array, ""]
+    """Stabiliser output VOTHSG [pu]."""
+
+
+class StabiliserInputs(NamedTuple):
+    """What a stabiliser may take as input (PSS/E ICON MODE 1-6), machine base."""
+
+    speed_dev_pu: Float[Array, ""]
+    """MODE 1: rotor speed deviation [pu]."""
+    freq_dev_pu: Float[Array, ""]
+    """MODE 2: bus frequency deviation [pu]."""
+    p_elec_pu: Float[Array, ""]
+    """MODE 3: electrical power [pu on MBASE]."""
+    p_accel_pu: Float[Array, ""]
+    """MODE 4: accelerating power Pm - Pe [pu on MBASE]."""
+    vt_pu: Float[Array, ""]
+    """MODE 5: bus voltage magnitude [pu]."""
+    dvt_dt_pu_s: Float[Array, ""]
+    """MODE 6: derivative of the bus voltage magnitude [pu/s]."""
+
+
+class AbstractExciter(eqx.Module):
+    """An excitation system: Efd from the terminal voltage, the field current and VOTHSG."""
+
+    @property
+    @abc.abstractmethod
+    def n_states(self) -> int:
+        """Length of the state vector."""
+
+    @abc.abstractmethod
+    def initial_state(self, efd0, inputs: ExciterInputs):
+        """(state, vref): the steady state with field voltage ``efd0`` [pu] at ``inputs``
+        (``vs_pu`` = 0), and the voltage reference Vref [pu] that holds it."""
+
+    @abc.abstractmethod
+    def vector_field(self, state, inputs: ExciterInputs, vref):
+        """d(state)/dt."""
+
+    @abc.abstractmethod
+    def efd(self, state, inputs: ExciterInputs):
+        """Field voltage Efd [pu]."""
+
+
+class AbstractStabiliser(eqx.Module):
+    """A power system stabiliser: VOTHSG from one or two input signals."""
+
+    @property
+    @abc.abstractmethod
+    def n_states(self) -> int:
+        """Length of the state vector."""
+
+    @abc.abstractmethod
+    def initial_state(self, inputs: StabiliserInputs):
+        """The steady state at constant ``inputs`` (output 0 in steady state for washout inputs)."""
+
+    @abc.abstractmethod
+    def vector_field(self, state, inputs: StabiliserInputs):
+        """d(state)/dt."""
+
+    @abc.abstractmethod
+    def output(self, state, inputs: StabiliserInputs):
+        """VOTHSG [pu], limited and voltage-cut-off as the model defines."""
+
+
+__all__ = ["AbstractExciter", "AbstractStabiliser", "ExciterInputs", "StabiliserInputs"]

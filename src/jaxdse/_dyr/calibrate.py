@@ -1,0 +1,304 @@
+"""Sensitivities, identifiability ranking and bounded calibration of a unit's .dyr parameters.
+
+One residual function serves all three: the playback's P and Q against the measured ones, on
+one or several events of the unit (vmapped, shared parameters), each channel divided by its
+noise level. Then
+
+* forward-mode autodiff gives the Jacobian J in the calibration coordinates, and the
+  normalised sensitivities ``theta_j dy/dtheta_j`` [pu];
+* the Fisher information F = J^T J ranks the parameters: eigenvectors, each parameter's
+  variance inflation ``F_jj (F^-1)_jj`` and its Cramer-Rao 95 % half-width; a parameter whose
+  half-width exceeds ``max_relative_ci`` cannot be identified from these events and is left at
+  its .dyr value;
+* optimistix's Levenberg-Marquardt fits the identifiable ones within the engineer's bounds, in
+  log-logistic coordinates (positive parameters) or logistic ones (signed, e.g. D);
+* the 95 % intervals come from the Gauss-Newton covariance ``s^2 (J^T J)^-1`` at the solution,
+  with ``s^2`` from the residuals and inflated by ``(1 + rho)/(1 - rho)`` for the lag-1
+  autocorrelation ``rho`` of the residuals (an AR(1) effective sample size).
+
+The eigen-decompositions and inverses of the small (p x p) matrices run on the host (NumPy).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from functools import partial
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .playback import PlaybackSettings, TerminalSeries, play_back
+from .unit import DyrUnit
+
+Z95 = 1.959963984540054
+
+
+@dataclasses.dataclass(frozen=True)
+class ParameterSpec:
+    """One calibratable parameter of a unit: where it sits and its bounds."""
+
+    part: str
+    """"machine", "exciter", "stabiliser" or "governor"."""
+    field: str
+    """Field of that module (e.g. ``h_s``)."""
+    label: str
+    """PSS/E name (e.g. ``H``), for tables and the calibrated .dyr."""
+    lower: float
+    upper: float
+    positive: bool = True
+    """Log-logistic coordinates (True) or logistic ones (a parameter that may be <= 0)."""
+
+    def value(self, unit: DyrUnit):
+        return getattr(getattr(unit, self.part), self.field)
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrationSettings:
+    """How identifiability is judged and the fit is run."""
+
+    max_relative_ci: float = 0.10
+    """A parameter is identifiable when its Cramer-Rao 95 % half-width is below this fraction
+    of its value (of its bound width for a parameter at 0)."""
+    noise_floor_pu: float = 1e-3
+    """Lower bound of the noise level of P and Q [pu of MBASE] used for the ranking: a PMU's
+    P and Q are not better than about 0.1 % (C37.118 TVE), whatever the data's smoothness."""
+    bound_factor: float = 4.0
+    """Default bounds of a positive parameter: [value / factor, value * factor]."""
+    rtol: float = 1e-8
+    atol: float = 1e-10
+    max_steps: int = 64
+
+
+class Events(NamedTuple):
+    """Several recordings of one unit, stacked (same length; ``weight`` 0 on padding)."""
+
+    series: TerminalSeries
+    p_pu: jax.Array
+    """Measured P [pu of MBASE], [E, T]."""
+    q_pu: jax.Array
+    """Measured Q [pu of MBASE], [E, T]."""
+    weight: jax.Array
+    """1 on valid frames, 0 on padding and on frames left out, [E, T]."""
+
+
+def measured_pq(series: TerminalSeries):
+    """P and Q out of the terminal from the series' V and I [pu]."""
+    vr = series.v_mag_pu * jnp.cos(series.v_ang_rad)
+    vi = series.v_mag_pu * jnp.sin(series.v_ang_rad)
+    return vr * series.i_re_pu + vi * series.i_im_pu, vi * series.i_re_pu - vr * series.i_im_pu
+
+
+def stack_events(series_list, weights=None) -> Events:
+    """Stack terminal series of equal length into :class:`Events`."""
+    series = jax.tree.map(lambda *x: jnp.stack(x), *series_list)
+    p, q = jax.vmap(measured_pq)(series)
+    w = jnp.ones_like(p) if weights is None else jnp.asarray(weights, dtype=p.dtype)
+    return Events(series, p, q, w)
+
+
+def noise_level(events: Events, floor: float) -> np.ndarray:
+    """(sigma_P, sigma_Q) [pu]: robust std of second differences / sqrt(6), floored."""
+    out = []
+    for y in (np.asarray(events.p_pu), np.asarray(events.q_pu)):
+        d2 = np.diff(y, 2, axis=-1).ravel()
+        s = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)
+        out.append(max(float(s), floor))
+    return np.asarray(out)
+
+
+# --- coordinates -----------------------------------------------------------------------------
+
+def _to_z(x, spec: ParameterSpec):
+    if spec.positive:
+        lo, hi = np.log(spec.lower), np.log(spec.upper)
+        u = (np.log(x) - lo) / (hi - lo)
+    else:
+        u = (x - spec.lower) / (spec.upper - spec.lower)
+    u = np.clip(u, 1e-9, 1 - 1e-9)
+    return float(np.log(u) - np.log1p(-u))
+
+
+def _from_z(z, spec: ParameterSpec):
+    u = jax.nn.sigmoid(z)
+    if spec.positive:
+        lo, hi = np.log(spec.lower), np.log(spec.upper)
+        return jnp.exp(lo + (hi - lo) * u)
+    return spec.lower + (spec.upper - spec.lower) * u
+
+
+def with_values(unit: DyrUnit, specs, values) -> DyrUnit:
+    """``unit`` with the parameters of ``specs`` set to ``values``."""
+    def where(u):
+        return [getattr(getattr(u, s.part), s.field) for s in specs]
+    return eqx.tree_at(where, unit, [jnp.asarray(v, dtype=float) for v in values])
+
+
+def _scale(spec: ParameterSpec, x0: float) -> float:
+    """What a relative change means for a parameter: its value, or its bound width at 0."""
+    return abs(x0) if abs(x0) > 1e-12 else (spec.upper - spec.lower)
+
+
+# --- residuals -------------------------------------------------------------------------------
+
+def residuals(values, unit: DyrUnit, specs, events: Events, sigma, settings: PlaybackSettings):
+    """Weighted playback residuals, flattened: [(P_sim - P)/sigma_P, (Q_sim - Q)/sigma_Q] per
+    event and frame (padding weighted 0). Non-finite playbacks give a large finite residual."""
+    u = with_values(unit, specs, values)
+
+    def one(series, p, q, w):
+        r = play_back(u, series, settings)
+        rp = (r.p_pu - p) / sigma[0]
+        rq = (r.q_pu - q) / sigma[1]
+        out = jnp.concatenate([w * rp, w * rq])
+        return jnp.where(jnp.isfinite(out), out, 1e3)
+
+    return jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight).ravel()
+
+
+# --- ranking ---------------------------------------------------------------------------------
+
+class Ranking(NamedTuple):
+    """Identifiability of each parameter from the given events (host arrays)."""
+
+    labels: list
+    sensitivity: np.ndarray
+    """RMS over frames of the normalised sensitivities of P and Q, ``x_j dP/dx_j`` [pu], [p, 2]."""
+    relative_ci: np.ndarray
+    """Cramer-Rao 95 % half-width / scale of each parameter [-]."""
+    variance_inflation: np.ndarray
+    """F_jj (F^-1)_jj [-]: how much the other parameters blur this one."""
+    eigenvalues: np.ndarray
+    eigenvectors: np.ndarray
+    """Columns: directions in normalised parameter space, largest eigenvalue first."""
+    identifiable: np.ndarray
+    reasons: list
+    """One sentence per parameter that the events cannot identify (empty string otherwise)."""
+
+
+@eqx.filter_jit
+def _residual_jacobian(t, x0, scale, unit, specs, events, sigma, settings):
+    def f(t):
+        return residuals(x0 + t * scale, unit, specs, events, sigma, settings)
+    return f(t), jax.jacfwd(f)(t)
+
+
+def jacobian(unit: DyrUnit, specs, events: Events, sigma, settings: PlaybackSettings):
+    """(residual, J, scale) at the unit's own values; J in normalised coordinates
+    (``x_j d r / d x_j``, or the bound width for a parameter at 0)."""
+    specs = tuple(specs)
+    x0 = np.array([float(s.value(unit)) for s in specs])
+    scale = np.array([_scale(s, v) for s, v in zip(specs, x0)])
+    r, jac = _residual_jacobian(jnp.zeros(len(specs)), jnp.asarray(x0), jnp.asarray(scale), unit,
+                                specs, events, jnp.asarray(sigma), settings)
+    return np.asarray(r), np.asarray(jac), scale
+
+
+def rank(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings = PlaybackSettings(),
+         cal: CalibrationSettings = CalibrationSettings()) -> Ranking:
+    """Sensitivities and identifiability of ``specs`` from ``events`` (at the .dyr values)."""
+    sigma = noise_level(events, cal.noise_floor_pu)
+    _, jac, _ = jacobian(unit, specs, events, sigma, settings)
+    n_ev, n_t = events.p_pu.shape
+    jr = jac.reshape(n_ev, 2, n_t, len(specs))
+    w = np.asarray(events.weight)
+    n_valid = max(float(w.sum()), 1.0)
+    sens = np.sqrt(np.einsum("ectp,et->pc", jr ** 2, w) / n_valid) * sigma[None, :]
+    fisher = jac.T @ jac
+    lam, vec = np.linalg.eigh(fisher)
+    order = np.argsort(lam)[::-1]
+    lam, vec = lam[order], vec[:, order]
+    cov = np.linalg.pinv(fisher, rcond=1e-14)
+    rel = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0))
+    vif = np.diag(fisher) * np.diag(cov)
+    ok = rel < cal.max_relative_ci
+    reasons = []
+    labels = [s.label for s in specs]
+    for j, s in enumerate(specs):
+        if ok[j]:
+            reasons.append("")
+            continue
+        partner = ""
+        if vif[j] > 10:
+            corr = cov[j] / np.sqrt(np.maximum(np.diag(cov) * cov[j, j], 1e-300))
+            k = int(np.argmax(np.where(np.arange(len(specs)) == j, 0.0, np.abs(corr))))
+            partner = f"; it trades off against {labels[k]} (correlation {corr[k]:+.2f})"
+        reasons.append(f"{s.part} {s.label}: these events fix it only to +-{100 * rel[j]:.0f} % "
+                       f"(95 %, variance inflation {vif[j]:.0f}){partner}; left at its .dyr value")
+    return Ranking(labels, sens, rel, vif, lam, vec, ok, reasons)
+
+
+# --- calibration -----------------------------------------------------------------------------
+
+class Calibration(NamedTuple):
+    """The fitted parameters with intervals (host values)."""
+
+    labels: list
+    dyr_values: np.ndarray
+    values: np.ndarray
+    ci95: np.ndarray
+    """[p, 2] lower and upper 95 % bounds."""
+    rms_before_pu: np.ndarray
+    """RMS error of (P, Q) over all events at the .dyr values [pu]."""
+    rms_after_pu: np.ndarray
+    autocorrelation: float
+    converged: bool
+    unit: DyrUnit
+
+
+@eqx.filter_jit
+def _rms_pq(unit, events, settings):
+    def one(series, p, q, w):
+        r = play_back(unit, series, settings)
+        return jnp.stack([jnp.sum(w * (r.p_pu - p) ** 2), jnp.sum(w * (r.q_pu - q) ** 2)])
+    s = jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight).sum(0)
+    return jnp.sqrt(s / jnp.maximum(jnp.sum(events.weight), 1.0))
+
+
+def _values(z, specs):
+    return jnp.stack([_from_z(z[j], s) for j, s in enumerate(specs)])
+
+
+def _fit_residuals(z, args):
+    unit, specs, events, sigma, settings = args
+    return residuals(_values(z, specs), unit, specs, events, sigma, settings)
+
+
+def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings = PlaybackSettings(),
+              cal: CalibrationSettings = CalibrationSettings()) -> Calibration:
+    """Bounded output-error fit of ``specs`` (identifiable ones) to ``events``, with intervals."""
+    sigma = noise_level(events, cal.noise_floor_pu)
+    specs = tuple(specs)
+    x0 = np.array([float(s.value(unit)) for s in specs])
+    z0 = jnp.asarray([_to_z(v, s) for v, s in zip(x0, specs)])
+    solver = optx.LevenbergMarquardt(rtol=cal.rtol, atol=cal.atol)
+    sol = optx.least_squares(_fit_residuals, solver, z0,
+                             args=(unit, specs, events, jnp.asarray(sigma), settings),
+                             max_steps=cal.max_steps, throw=False)
+    values = partial(_values, specs=specs)
+    x = np.asarray(values(sol.value))
+    fitted = with_values(unit, specs, x)
+    r, jac, scale = jacobian(fitted, specs, events, sigma, settings)
+    n_ev, n_t = events.p_pu.shape
+    w = np.asarray(events.weight)
+    n = float(2 * w.sum())
+    dof = max(n - len(specs), 1.0)
+    s2 = float(r @ r) / dof
+    res = r.reshape(n_ev, 2, n_t)
+    num = np.sum(res[..., 1:] * res[..., :-1])
+    den = np.sum(res ** 2)
+    rho = float(np.clip(num / den, 0.0, 0.999)) if den > 0 else 0.0
+    cov = s2 * (1 + rho) / (1 - rho) * np.linalg.pinv(jac.T @ jac, rcond=1e-14)
+    half = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
+    ci = np.stack([x - half, x + half], axis=1)
+    return Calibration([s.label for s in specs], x0, x, ci, np.asarray(_rms_pq(unit, events, settings)),
+                       np.asarray(_rms_pq(fitted, events, settings)), rho,
+                       bool(sol.result == optx.RESULTS.successful), fitted)
+
+
+__all__ = ["Calibration", "CalibrationSettings", "Events", "ParameterSpec", "Ranking", "calibrate",
+           "jacobian", "measured_pq", "noise_level", "rank", "residuals", "stack_events",
+           "with_values"]

@@ -1,0 +1,130 @@
+"""A unit's .dyr model from its PSS/E records (host side, at the edge).
+
+:func:`unit_model` reads a generator's machine, exciter, stabiliser and governor records into a
+:class:`DyrUnit`. A unit that has a record of a model jaxdse does not simulate (or none of a
+machine) gets no .dyr model: ``unit`` is None and ``missing`` says which record, so that the
+caller falls back to the surrogate and says why.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+from .._io.psse import (
+    PSSE_GOVERNOR_MODELS,
+    DyrData,
+    DyrRecord,
+    RawCase,
+    governor_from_dyr,
+    record_label,
+)
+from .exciter import EXCITERS, exciter_from_dyr
+from .machine import MACHINES, machine_from_dyr
+from .stabiliser import STABILISERS, stabiliser_from_dyr
+from .unit import DyrUnit
+
+PSSE_EXCITER_MODELS = frozenset({
+    "AC7B", "AC8B", "BBSEX1", "BUDCZT", "CELIN", "DC3A", "EMAC1T", "ESAC1A", "ESAC2A", "ESAC3A",
+    "ESAC4A", "ESAC5A", "ESAC6A", "ESAC8B", "ESDC1A", "ESDC2A", "ESST1A", "ESST2A", "ESST3A",
+    "ESST4B", "ESST5B", "ESST6B", "ESST7B", "ESURRY", "EX2000", "EXAC1", "EXAC1A", "EXAC2",
+    "EXAC3", "EXAC4", "EXBAS", "EXDC2", "EXELI", "EXNEBB", "EXNI", "EXPIC1", "EXST1", "EXST2",
+    "EXST2A", "EXST3", "IEEET1", "IEEET2", "IEEET3", "IEEET4", "IEEET5", "IEEEX1", "IEEEX2",
+    "IEEEX3", "IEEEX4", "IEET1A", "IEET1B", "IEET5A", "IEEX2A", "REXSYS", "SCRX", "SEXS",
+    "ST5B", "ST6B", "ST7B", "URHIDT", "URST5T"})
+"""Excitation-system models of the PSS/E model library (simulated or not)."""
+PSSE_STABILISER_MODELS = frozenset({
+    "BEPSST", "IEE2ST", "IEEEST", "IVOST", "OSTB2T", "OSTB5T", "PSS1A", "PSS2A", "PSS2B",
+    "PSS2C", "PSS3B", "PSS4B", "PTIST1", "PTIST3", "ST2CUT", "STAB1", "STAB2A", "STAB3",
+    "STAB4", "STABNI", "STBSVC"})
+"""Stabiliser models of the PSS/E model library (simulated or not)."""
+
+
+@dataclass
+class UnitModel:
+    """One generator's .dyr model, or why it has none."""
+
+    unit: DyrUnit | None
+    models: dict[str, str] = field(default_factory=dict)
+    """{"machine": "GENROU", "exciter": "SEXS", ...} of the records used."""
+    missing: list[str] = field(default_factory=list)
+    """Why the unit has no .dyr model (one line each); empty when ``unit`` is set."""
+    notes: list[str] = field(default_factory=list)
+    """What a reader should know about the model used (remote stabiliser inputs, ...)."""
+
+    @property
+    def structure(self) -> tuple[str, ...]:
+        """The model names in a fixed order: units of one structure share one compiled call."""
+        return tuple(self.models.get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
+
+
+def _kind(record: DyrRecord) -> str:
+    if record.model in MACHINES or record.kind == "machine":
+        return "machine"
+    if record.model in PSSE_EXCITER_MODELS or record.model in EXCITERS:
+        return "exciter"
+    if record.model in PSSE_STABILISER_MODELS or record.model in STABILISERS:
+        return "stabiliser"
+    if record.model in PSSE_GOVERNOR_MODELS or record.kind == "governor":
+        return "governor"
+    return "other"
+
+
+def unit_model(dyr: DyrData, raw: RawCase, bus: int, machine_id: str, *,
+               ke_zero: Literal["psse", "literal"] = "psse") -> UnitModel:
+    """The :class:`DyrUnit` of generator (``bus``, ``machine_id``) from its records;
+    ``ke_zero``: how a DC exciter's KE = 0 is read (see :class:`jaxdse.IEEEX1`)."""
+    gen = raw.generator(bus, machine_id)
+    out = UnitModel(unit=None)
+    parts: dict[str, object] = {}
+    for rec in dyr.unit_records(bus, machine_id):
+        kind = _kind(rec)
+        if kind == "other":
+            out.notes.append(f"{record_label(rec)}: not a machine, exciter, stabiliser or governor "
+                             "model; left out of the playback")
+            continue
+        if kind in parts or kind in out.models:
+            out.missing.append(f"{record_label(rec)}: a second {kind} record for this machine")
+            continue
+        out.models[kind] = rec.model
+        if rec.problem:
+            out.missing.append(rec.problem)
+            continue
+        try:
+            if kind == "machine":
+                if rec.model not in MACHINES:
+                    raise ValueError(f"machine model {rec.model} is not simulated "
+                                     f"({', '.join(MACHINES)})")
+                parts[kind] = machine_from_dyr(rec.model, rec.params, ra_pu=gen.zr_pu,
+                                               x_source_pu=gen.zx_pu, f_nominal_hz=raw.basfrq_hz)
+            elif kind == "exciter":
+                if rec.model not in EXCITERS:
+                    raise ValueError(f"exciter model {rec.model} is not simulated "
+                                     f"({', '.join(EXCITERS)})")
+                parts[kind] = exciter_from_dyr(rec.model, rec.constants, ke_zero=ke_zero)
+            elif kind == "stabiliser":
+                if rec.model not in STABILISERS:
+                    raise ValueError(f"stabiliser model {rec.model} is not simulated "
+                                     f"({', '.join(STABILISERS)})")
+                stab = stabiliser_from_dyr(rec.model, rec.constants)
+                if stab.remote_input_at_terminal:
+                    out.notes.append(f"{record_label(rec)}: remote-bus input taken at the terminal")
+                parts[kind] = stab
+            else:
+                parts[kind] = governor_from_dyr(rec, mbase_mva=gen.mbase_mva)
+        except (ValueError, KeyError, TypeError) as err:
+            msg = str(err).splitlines()[0] if str(err) else type(err).__name__
+            out.missing.append(f"{record_label(rec)}: {msg}")
+    if "machine" not in out.models:
+        out.missing.append(f"generator {bus} {machine_id!r}: no machine record")
+    if not out.missing:
+        out.unit = DyrUnit(machine=parts["machine"], exciter=parts.get("exciter"),
+                           stabiliser=parts.get("stabiliser"), governor=parts.get("governor"))
+        for kind in ("exciter", "governor"):
+            if kind not in out.models:
+                out.notes.append(f"no {kind} record: {'Efd' if kind == 'exciter' else 'Tm'} "
+                                 "held at its initial value")
+    return out
+
+
+__all__ = ["PSSE_EXCITER_MODELS", "PSSE_STABILISER_MODELS", "UnitModel", "unit_model"]
