@@ -9,8 +9,11 @@ sweeps, tuning), ``_sim`` (the ground-truth simulator) and ``_app`` (the command
 
 from ._version import __version__ as __version__  # isort: skip  (first: the app reads it)
 from ._app.demo import demo_scenarios as demo_scenarios
+from ._app.dyr_fleet import CalibrateOptions as CalibrateOptions
 from ._app.fleet import fleet as fleet
 from ._app.run import run_config as run_config
+from ._app.validate import parameter_specs as parameter_specs
+from ._app.validate import validate as validate
 from ._core.assess import Assessment as Assessment
 from ._core.assess import assess as assess
 from ._core.drem import ObserverConfig as ObserverConfig
@@ -61,6 +64,7 @@ from ._dyr.calibrate import calibrate as calibrate
 from ._dyr.calibrate import measured_pq as measured_pq
 from ._dyr.calibrate import rank as rank
 from ._dyr.calibrate import stack_events as stack_events
+from ._dyr.calibrate import with_values as with_values
 from ._dyr.exciter import ESDC2A as ESDC2A
 from ._dyr.exciter import ESST3A as ESST3A
 from ._dyr.exciter import EXST1 as EXST1

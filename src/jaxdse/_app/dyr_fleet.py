@@ -18,10 +18,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._dyr.exciter import EXCITERS
 from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
 from .._dyr.records import UnitModel, unit_model
+from .._dyr.stabiliser import STABILISERS
 
 PLAYBACK_MODELS = ("surrogate", "dyr")
+SIMULATED_RECORDS = frozenset({*EXCITERS, *STABILISERS})
+"""Record models that the .dyr playback simulates beyond the machines and governors."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,6 +55,38 @@ class PlaybackOptions:
     @property
     def settings(self) -> PlaybackSettings:
         return PlaybackSettings(solver=self.solver, substeps=self.substeps)
+
+
+@dataclasses.dataclass(frozen=True)
+class CalibrateOptions:
+    """[calibrate] (``jaxdse validate``): the events, the parameters and their bounds."""
+
+    events: tuple[str, ...] = ()
+    """More recordings of the same plants (same columns as [measurement]), paths relative to
+    the file: all events are fitted jointly."""
+    parameters: tuple[str, ...] = ()
+    """PSS/E names of the parameters to rank and calibrate (e.g. ["H", "KA", "R"]); empty: H, D,
+    the exciter's main gain and time constant, the governor's droop and main time constant."""
+    bounds: dict = dataclasses.field(default_factory=dict)
+    """{PSS/E name: [lower, upper]}: the engineer's bounds; others get [x/4, 4x] (D: [-5, 20])."""
+    bound_factor: float = 4.0
+    """Default bounds of a positive parameter: [x / factor, x * factor]."""
+    max_relative_ci: float = 0.10
+    """A parameter is calibrated only if the events fix it within this fraction (95 %)."""
+    noise_floor_pu: float = 1e-3
+    """Smallest noise level of P and Q assumed in the ranking [pu of MBASE]."""
+    substeps: int = 2
+    """Fixed steps per frame of the playbacks inside the fit (the before/after playbacks use
+    [playback] substeps)."""
+
+    def __post_init__(self):
+        for k, b in self.bounds.items():
+            if len(b) != 2 or not b[0] < b[1]:
+                raise ValueError(f"bounds.{k} must be [lower, upper] with lower < upper, got {b}")
+        if not 0 < self.max_relative_ci:
+            raise ValueError("max_relative_ci must be > 0")
+        if self.bound_factor <= 1:
+            raise ValueError("bound_factor must be > 1")
 
 
 @dataclasses.dataclass
@@ -119,6 +155,25 @@ class PlantPlayback:
     ok: bool
 
 
+@dataclasses.dataclass
+class DyrOutcome:
+    """A plant's .dyr playback, or why it played back the surrogate (``playback`` None)."""
+
+    model: PlantModel
+    playback: PlantPlayback | None
+
+    def entry(self, surrogate_rms: dict) -> dict:
+        """The fleet.json fields of the .dyr playback."""
+        out = {"playback_models": self.model.models, "playback_notes": self.model.notes,
+               "surrogate_playback_rms_percent_mbase": surrogate_rms}
+        if self.playback is None:
+            out["playback_fallback"] = self.model.fallback
+        elif not self.playback.ok:
+            out["playback_fallback"] = ("the .dyr playback did not reach the end (solver failure "
+                                        "or non-finite states)")
+        return out
+
+
 def play_back_plants(jobs: dict, options: PlaybackOptions) -> dict:
     """Play back every plant of ``jobs`` = {name: (PlantModel, TerminalSeries on the plant
     base)}; returns {name: PlantPlayback}. Units of one structure and length share a call."""
@@ -155,5 +210,5 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> dict:
     return out
 
 
-__all__ = ["PLAYBACK_MODELS", "PlantModel", "PlantPlayback", "PlaybackOptions", "plant_model",
-           "play_back_plants", "terminal_series"]
+__all__ = ["PLAYBACK_MODELS", "SIMULATED_RECORDS", "CalibrateOptions", "DyrOutcome", "PlantModel",
+           "PlantPlayback", "PlaybackOptions", "plant_model", "play_back_plants", "terminal_series"]

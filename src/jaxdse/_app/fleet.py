@@ -29,6 +29,7 @@ from .._io.measurement import condition
 from .._io.readers import load_table
 from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
+from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_plants, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
 from .fleet_report import write_report
 from .progress import Progress
@@ -55,7 +56,8 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     stream = stream or sys.stderr
     for note in fleet.notes:
         print(f"jaxdse: note: {note}", file=stream)
-    unknown = fleet.dyr.unknown_models
+    unknown = [m for m in fleet.dyr.unknown_models
+               if fleet.playback.model != "dyr" or m not in SIMULATED_RECORDS]
     if unknown:
         print(f"jaxdse: note: {fleet.dyr.source}: models read but not used: {', '.join(unknown)}",
               file=stream)
@@ -86,10 +88,11 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     assessed = assess_units(work, fleet.observer,
                             settings, fleet.identify, fleet.verdict, size=size,
                             progress=lambda line: progress.step(f"assessed {line}"))
+    dyr = dyr_playbacks(fleet, [u[0] for u in units], assessed)
     entries, traces = [], {}
     for (p, rec, t0, quality), a in zip(units, assessed):
-        traces[p.name] = _traces(a.estimate, a.replay)
-        entry = fleet_entry(p, a, quality, fleet.criteria)
+        traces[p.name] = _traces(a.estimate, a.replay, dyr.get(p.name))
+        entry = fleet_entry(p, a, quality, fleet.criteria, dyr.get(p.name))
         entries.append(entry)
         if entry["verdict"] != "identified":
             why = "; ".join(v for key, v in entry["reasons"].items() if key not in NOTES) or "see fleet.json"
@@ -118,8 +121,28 @@ def fleet(path, out_dir, stream=None) -> list[dict]:
     return run_fleet(load_fleet(path), Path(out_dir), stream)["units"]
 
 
-def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict) -> dict:
-    """One unit of ``fleet.json``: the run summary entry plus the plant, the reference and the checks."""
+def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant], assessed) -> dict:
+    """{plant name: DyrOutcome} when ``[playback] model = "dyr"``, else {}."""
+    if fleet.playback.model != "dyr":
+        return {}
+    out, jobs = {}, {}
+    for p, a in zip(plants, assessed):
+        pm = plant_model(fleet.raw, fleet.dyr, p, fleet.playback)
+        if pm.fallback:
+            out[p.name] = DyrOutcome(pm, None)
+            continue
+        tr = a.estimate.trajectories
+        jobs[p.name] = (pm, terminal_series(a.estimate.time_s, tr.v_t_pu, tr.theta_t_rad, tr.p_t_pu,
+                                            tr.q_t_pu))
+    for name, pb in play_back_plants(jobs, fleet.playback).items():
+        out[name] = DyrOutcome(jobs[name][0], pb)
+    return out
+
+
+def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
+                dyr: DyrOutcome | None = None) -> dict:
+    """One unit of ``fleet.json``: the run summary entry plus the plant, the reference and the
+    checks; with ``dyr`` (``[playback] model = "dyr"``), the playback is the .dyr model's."""
     href = p.run.h_reference_s
     ident = a.identified
     e = summary_entry(p.name, a, h_reference_s=href)
@@ -128,7 +151,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict) -> 
     ident_info = e.get("identification", {})
     half = ident_info.get("relative_ci_percent")
     smape = e["smape_percent"]
-    traces = _traces(a.estimate, a.replay)
+    traces = _traces(a.estimate, a.replay, dyr)
     measured, replayed = ({k: traces[k][j] for k in WINDOW_CHANNELS} for j in (0, 1))
     scores = window_scores(traces["time_s"], measured, replayed, _channel_scale(p), window_criteria(criteria))
     checks = {
@@ -149,7 +172,8 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict) -> 
                      "condition": ident_info.get("condition")},
         "playback_smape_percent": {"I_t": smape["I_t"], "P_t": smape["P_t"]},
         "playback_rms_percent_mbase": _rms_percent(traces, p),
-        "playback_model": "surrogate",
+        "playback_model": "dyr" if dyr is not None and dyr.playback is not None else "surrogate",
+        **({} if dyr is None else dyr.entry(_rms_percent(_traces(a.estimate, a.replay), p))),
         "playback_windows": scores.as_dict(),
         "criteria": checks, "passes": all(c["pass"] for c in checks.values()),
         "parameters": e["parameters"],
@@ -204,14 +228,21 @@ def _check(value, limit, what):
             "pass": value is not None and value <= limit}
 
 
-def _traces(est, rep) -> dict:
-    """Measured and played-back x2, I_t, P_t, Q_t for the unit page (host arrays)."""
+def _traces(est, rep, dyr: DyrOutcome | None = None) -> dict:
+    """Measured and played-back x2, I_t, P_t, Q_t for the unit page (host arrays): the
+    surrogate's playback, or the .dyr model's where ``dyr`` has one."""
     tr = est.trajectories
     pb = rep.playback if rep is not None else tr.playback
     out = {"time_s": np.asarray(est.time_s)}
     for k, meas, sim in (("x2", tr.x2_meas_rad_s, pb.x2_rad_s), ("I_t", tr.i_t_pu, pb.i_t_pu),
                          ("P_t", tr.p_t_pu, pb.p_t_pu), ("Q_t", tr.q_t_pu, pb.q_t_pu)):
         out[k] = (np.asarray(meas), np.asarray(sim))
+    if dyr is not None and dyr.playback is not None:
+        d = dyr.playback
+        v = np.asarray(tr.v_t_pu)
+        i_t = np.hypot(d.p_pu, d.q_pu) / np.where(v > 0, v, 1.0)
+        for k, sim in (("x2", d.x2_rad_s), ("I_t", i_t), ("P_t", d.p_pu), ("Q_t", d.q_pu)):
+            out[k] = (out[k][0], np.asarray(sim))
     return out
 
 
@@ -227,7 +258,7 @@ def fleet_document(fleet: Fleet, entries: list[dict], skipped: list[dict], wall_
                  "dyr": fleet.dyr.source, "dyr_models": dict(fleet.dyr.counts),
                  "dyr_models_not_used": fleet.dyr.unknown_models},
         "inputs": [{"file": f, "sha256": sha256(Path(f))} for f in
-                   [fleet.raw.source, fleet.dyr.source, *inputs]],
+                   [fleet.raw.source, *fleet.dyr.source.split(" + "), *inputs]],
         "summary": {
             "units": len(entries), "skipped": len(skipped),
             "median_abs_H_error_percent": float(np.median(errs)) if errs.size else None,

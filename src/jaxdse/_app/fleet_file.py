@@ -24,7 +24,7 @@ from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
 from .._io.config import GeneratorRun
 from .._io.errors import InputError
-from .._io.psse import DyrData, RawCase, read_dyr, read_raw
+from .._io.psse import DyrData, RawCase, merge_dyr, read_dyr, read_raw
 from .._io.readers import load_table
 from .._io.schema import (
     build,
@@ -38,7 +38,7 @@ from .._io.schema import (
     subtable,
     typed_value,
 )
-from .dyr_fleet import PlaybackOptions
+from .dyr_fleet import CalibrateOptions, PlaybackOptions
 from .fleet_plants import Member, generator_run, governor_sets, governor_slots, plant_units
 from .windows import WindowCriteria
 
@@ -46,7 +46,7 @@ LAYOUTS = ("per_machine", "step_up_branch")
 """How plants and their columns are found from [channels] (see ``FLEET_HELP`` in the CLI)."""
 ROLES = ("time", "frequency", "v_mag", "v_ang", "i_mag", "i_ang")
 TOP = {"case", "measurement", "channels", "unit", "observer", "settings", "identify", "criteria",
-       "output", "playback"}
+       "output", "playback", "calibrate"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -95,6 +95,8 @@ class Fleet:
     figures: bool = True
     playback: PlaybackOptions = PlaybackOptions()
     """[playback]: the surrogate or the units' own .dyr models."""
+    calibrate: CalibrateOptions = CalibrateOptions()
+    """[calibrate]: events, parameters and bounds of ``jaxdse validate``."""
     notes: tuple[str, ...] = ()
     """Records of the .raw/.dyr that were dropped or not used and belong to no plant (e.g. a
     .dyr record without a readable bus number): one line each."""
@@ -116,12 +118,16 @@ def load_fleet(path) -> Fleet:
     no_unknown(path, case, {"raw", "dyr"}, "case.")
     files = {}
     for k in ("raw", "dyr"):
-        if not isinstance(case.get(k), str):
-            raise InputError(path, f"the PSS/E .{k} file is required (a path, relative to this file)",
-                             key=f"case.{k}")
-        p = Path(case[k])
-        files[k] = p if p.is_absolute() else path.parent / p
-    raw, dyr = read_raw(files["raw"], strict=False), read_dyr(files["dyr"], strict=False)
+        value = case.get(k)
+        names = value if k == "dyr" and isinstance(value, list) and value else [value]
+        if not all(isinstance(n, str) and n for n in names):
+            raise InputError(path, f"the PSS/E .{k} file is required (a path, relative to this file"
+                             + ("; or a list of .dyr files, later records replacing earlier ones of "
+                                "the same machine and model, e.g. a calibrated.dyr" if k == "dyr" else "")
+                             + ")", key=f"case.{k}")
+        files[k] = [Path(n) if Path(n).is_absolute() else path.parent / n for n in names]
+    raw = read_raw(files["raw"][0], strict=False)
+    dyr = merge_dyr(*(read_dyr(f, strict=False) for f in files["dyr"]))
     meas = dict(subtable(path, data, "measurement", "measurement"))
     if meas.get("location", "terminal") not in ("terminal", "hv"):
         raise InputError(path, "a fleet's PMUs are at the machine terminal or on the HV side of "
@@ -178,13 +184,46 @@ def load_fleet(path) -> Fleet:
     playback = build(path, PlaybackOptions, options(
         path, PlaybackOptions, subtable(path, data, "playback", "playback"), "playback.", minimum=1),
         "playback")
+    calibrate = calibrate_section(path, subtable(path, data, "calibrate", "calibrate"))
     return Fleet(path=path, raw=raw, dyr=dyr, plants=tuple(built), skipped=tuple(skipped),
                  observer=module_section(path, ObserverConfig,
                                          subtable(path, data, "observer", "observer"), "observer"),
                  settings=settings_section(path, subtable(path, data, "settings", "settings")),
                  identify=identify, verdict=verdict, criteria=criteria, figures=figures,
-                 playback=playback,
+                 playback=playback, calibrate=calibrate,
                  notes=tuple(_one_line(n) for n in (*raw.problems, *dyr.problems)))
+
+
+def calibrate_section(path: Path, table: dict) -> CalibrateOptions:
+    """[calibrate]: event files (relative to the fleet file), parameter names, bounds, numbers."""
+    table = dict(table)
+    events = table.pop("events", [])
+    if not isinstance(events, list) or not all(isinstance(e, str) and e for e in events):
+        raise InputError(path, "must be a list of recording files", key="calibrate.events")
+    files = []
+    for e in events:
+        f = Path(e) if Path(e).is_absolute() else path.parent / e
+        if not f.is_file():
+            raise InputError(path, f"no such file: {f}", key="calibrate.events")
+        files.append(str(f))
+    names = table.pop("parameters", [])
+    if not isinstance(names, list) or not all(isinstance(n, str) and n for n in names):
+        raise InputError(path, "must be a list of PSS/E parameter names, e.g. [\"H\", \"KA\"]",
+                         key="calibrate.parameters")
+    bounds = table.pop("bounds", {})
+    if not isinstance(bounds, dict):
+        raise InputError(path, "must be a table {NAME = [lower, upper]}", key="calibrate.bounds")
+    for k, b in bounds.items():
+        if not (isinstance(b, list) and len(b) == 2 and all(isinstance(x, (int, float)) and
+                                                            not isinstance(x, bool) for x in b)
+                and b[0] < b[1]):
+            raise InputError(path, f"must be [lower, upper] with lower < upper, got {b!r}",
+                             key=f"calibrate.bounds.{k}")
+    kw = options(path, CalibrateOptions, table, "calibrate.",
+                 keys={"bound_factor", "max_relative_ci", "noise_floor_pu", "substeps"})
+    return build(path, CalibrateOptions, {**kw, "events": tuple(files), "parameters": tuple(names),
+                                          "bounds": {k: tuple(map(float, b)) for k, b in bounds.items()}},
+                 "calibrate")
 
 
 def _one_line(text) -> str:

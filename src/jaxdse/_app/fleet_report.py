@@ -116,7 +116,7 @@ def plot_playback(e: dict, tr: dict, path: Path) -> None:
     for ax, k in zip(axes, labels):
         meas, sim = tr[k]
         ax.plot(t, meas, lw=0.8, color="k", label="measured")
-        ax.plot(t, sim, lw=0.9, color="tab:red", alpha=0.85, label="simulated (playback, identified H, D)")
+        ax.plot(t, sim, lw=0.9, color="tab:red", alpha=0.85, label=_sim_label(e))
         if t_event is not None:
             ax.axvspan(t_event, t_event + event_s, color="tab:blue", alpha=0.08)
         fin = meas[np.isfinite(meas)]
@@ -137,6 +137,31 @@ def plot_playback(e: dict, tr: dict, path: Path) -> None:
 
 
 # --- pages ------------------------------------------------------------------------------------
+
+def _sim_label(e: dict) -> str:
+    if e.get("playback_model") == "dyr":
+        return "simulated (the unit's .dyr model, recorded voltage imposed)"
+    return "simulated (3rd-order playback, identified H, D)"
+
+
+def _playback_text(e: dict) -> str:
+    """What the simulated traces are, and (for the .dyr model) which records and notes."""
+    if e.get("playback_model") == "dyr":
+        models = "; ".join("/".join(m.get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
+                           for m in e.get("playback_models", []))
+        notes = "".join(f"<li>{html.escape(n)}</li>" for n in e.get("playback_notes", []))
+        sur = e.get("surrogate_playback_rms_percent_mbase") or {}
+        return (f"<p class=\"small\">The simulated traces play the recorded terminal voltage into the "
+                f"unit's own PSS/E records (machine/exciter/stabiliser/governor: {html.escape(models)}), "
+                f"PSS/E PLBVFU1 convention, from the steady state of the first frames. The 3rd-order "
+                f"surrogate with the identified H and D gave RMS errors of P {_f(sur.get('P_t'), '.2f')} %, "
+                f"Q {_f(sur.get('Q_t'), '.2f')} % of MBASE.</p>"
+                + (f"<ul class=\"small\">{notes}</ul>" if notes else ""))
+    fb = e.get("playback_fallback")
+    return ("<p class=\"small\">The simulated traces replay the recording's terminal voltage into the "
+            "third-order machine with the identified H and D and the plant's governor model(s)."
+            + (f" The .dyr model was asked for but not used: {html.escape(fb)}" if fb else "") + "</p>")
+
 
 def _f(x, spec=".2f") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
@@ -320,8 +345,7 @@ governor model(s): {html.escape(', '.join(e['governor_models']))}; PMU at the
 {f'<p>Notes (do not change the verdict):</p><ul>{note_list}</ul>' if note_list else ''}
 <h2>Playback: measured against simulated</h2>
 {f'<img src="{name}.png" alt="measured and simulated x2, I_t, P_t, Q_t">' * figures}
-<p class="small">The simulated traces replay the recording's terminal voltage into the
-third-order machine with the identified H and D and the plant's governor model(s).</p>
+{_playback_text(e)}
 <h2>Numbers</h2><table>{num_rows}</table>
 <h2>Acceptance criteria</h2>
 <table><tr><th>quantity</th><th>value</th><th>limit</th><th>result</th></tr>{crit_rows}</table>

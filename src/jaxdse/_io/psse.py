@@ -213,6 +213,23 @@ class DyrData:
         return self._find(bus, machine_id, "governor")
 
 
+def merge_dyr(base: DyrData, *overrides: DyrData) -> DyrData:
+    """``base`` with each record of ``overrides`` replacing the record of the same bus, machine
+    ID and model (a calibrated .dyr holds only the changed records); new records are added."""
+    records = list(base.records)
+    for over in overrides:
+        for rec in over.records:
+            key = (rec.bus, rec.id.upper(), rec.model)
+            hits = [k for k, r in enumerate(records) if (r.bus, r.id.upper(), r.model) == key]
+            if hits:
+                records[hits[0]] = rec
+            else:
+                records.append(rec)
+    return DyrData(" + ".join([base.source, *(o.source for o in overrides)]), records,
+                   base.empty_records + sum(o.empty_records for o in overrides),
+                   [*base.problems, *(p for o in overrides for p in o.problems)])
+
+
 # --- .dyr reader ------------------------------------------------------------------------------
 
 def _tokens(text: str):
@@ -1120,6 +1137,6 @@ __all__ = [
     "DyrData", "DyrRecord",
     "MachineTransientData", "RawBranch", "RawBus", "RawCase", "RawGenerator", "RawLoad",
     "RawTransformer", "generator_label", "governor_from_dyr", "load_unit", "machine_kwargs",
-    "machine_problems", "parse_number", "q_axis_problems", "read_dyr", "read_raw",
+    "machine_problems", "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "read_raw",
     "record_label", "transformer_kwargs", "transformer_sides", "transient_data",
 ]

@@ -1,0 +1,110 @@
+"""``[playback] model = "dyr"`` in ``jaxdse fleet`` and ``jaxdse validate``: the units' own PSS/E
+records against ANDES's recordings (an independent simulator), the fallback for a model jaxdse
+does not simulate, and the calibrated.dyr round trip."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import jaxdse as jd
+from jaxdse._app.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
+KEEP_S = 20.0
+COLS = "time = \"time_s\", v_mag = \"{t}/VM\", v_ang = \"{t}/VA\", i_mag = \"{t}/IM\", i_ang = \"{t}/IA\""
+
+
+def _trim(src: Path, dst: Path) -> str:
+    df = pd.read_csv(src)
+    df[df["time_s"] <= KEEP_S].to_csv(dst, index=False)
+    return dst.name
+
+
+def _case(tmp: Path, dyr_text: str, events=("line_trip",), tags=("B1_G1", "B2_G1")) -> Path:
+    (tmp / "case.raw").write_text((DATA / "ieee14.raw").read_text())
+    (tmp / "case.dyr").write_text(dyr_text)
+    files = [_trim(DATA / f"{e}.csv.gz", tmp / f"{e}.csv") for e in events]
+    units = "".join(f"\n[[unit]]\nname = \"{t}\"\nbus = {b}\ncolumns = {{{COLS.format(t=t)}}}\n"
+                    for t, b in ((t, int(t[1:t.index("_")])) for t in tags))
+    text = (f"[case]\nraw = \"case.raw\"\ndyr = \"case.dyr\"\n\n[measurement]\nfile = \"{files[0]}\"\n"
+            "location = \"terminal\"\nvoltage_unit = \"pu\"\ncurrent_unit = \"pu\"\nangle_unit = \"deg\"\n"
+            "s_base_mva = 100.0\nmin_segment_s = 10.0\n" + units
+            + "\n[identify]\nbootstrap_draws = 4\n\n[playback]\nmodel = \"dyr\"\n"
+            + (f"\n[calibrate]\nevents = {json.dumps(files[1:])}\nparameters = [\"H\", \"KA\", \"R\"]\n"
+               if len(files) > 1 else ""))
+    (tmp / "fleet.toml").write_text(text)
+    return tmp / "fleet.toml"
+
+
+@pytest.fixture(scope="module")
+def fleet_run(tmp_path_factory):
+    """One fleet run: B1_G1 with its own records, B2_G1 with its exciter renamed to a model
+    jaxdse does not simulate (ESAC1A, same constants)."""
+    tmp = tmp_path_factory.mktemp("dyr_fleet")
+    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'ESAC1A'")
+    path = _case(tmp, text)
+    assert main(["fleet", str(path), "--out", str(tmp / "out")]) == 0
+    return tmp, json.loads((tmp / "out" / "fleet.json").read_text())
+
+
+def test_fleet_dyr_playback_matches_andes(fleet_run):
+    tmp, doc = fleet_run
+    u = {e["name"]: e for e in doc["units"]}["B1_G1"]
+    assert u["playback_model"] == "dyr"
+    assert u["playback_models"] == [{"machine": "GENROU", "exciter": "ESST3A", "governor": "TGOV1"}]
+    # ANDES's own P and Q, its terminal voltage imposed: far below the surrogate's error
+    assert u["playback_rms_percent_mbase"]["P_t"] < 0.1
+    assert u["playback_rms_percent_mbase"]["Q_t"] < 0.1
+    assert u["surrogate_playback_rms_percent_mbase"]["Q_t"] > 3 * u["playback_rms_percent_mbase"]["Q_t"]
+    assert u["criteria"]["event_windows"]["pass"]
+    page = (tmp / "out" / "units" / "B1_G1.html").read_text()
+    assert "own PSS/E records" in page and "ESST3A" in page
+
+
+def test_fleet_dyr_falls_back_for_an_unsimulated_model(fleet_run):
+    tmp, doc = fleet_run
+    u = {e["name"]: e for e in doc["units"]}["B2_G1"]
+    assert u["playback_model"] == "surrogate"
+    assert "ESAC1A" in u["playback_fallback"] and "not simulated" in u["playback_fallback"]
+    assert "ESAC1A" in (tmp / "out" / "units" / "B2_G1.html").read_text()
+
+
+def test_validate_recovers_planted_h_and_round_trips(tmp_path):
+    """H planted 15 % high in the .dyr: the calibration on two events brings it back to the
+    ANDES value, calibrated.dyr reads back, and a fleet run on [case.dyr, calibrated.dyr]
+    reproduces the calibrated playback."""
+    truth = json.loads((DATA / "truth.json").read_text())
+    h_true = next(m["H_s_mbase"] for m in truth["machines"] if m["tag"] == "B1_G1")
+    text = (DATA / "ieee14.dyr").read_text()
+    first = text.index("1 'GENROU'")
+    rec = text[first:text.index("/", first)]
+    cons = rec.split()
+    cons[7] = f"{1.15 * h_true:g}"         # bus 'GENROU' id T'do T''do T'qo T''qo H ...
+    text = text.replace(rec, " ".join(cons) + " ")
+    path = _case(tmp_path, text, events=("line_trip", "load_step"), tags=("B1_G1",))
+    assert main(["validate", str(path), "--out", str(tmp_path / "val")]) == 0
+    doc = json.loads((tmp_path / "val" / "validate.json").read_text())
+    u = {e["name"]: e for e in doc["units"]}
+    b1 = {p["parameter"]: p for p in u["B1_G1"]["parameters"]}
+    assert b1["H"]["identifiable"]
+    assert b1["H"]["calibrated_value"] == pytest.approx(h_true, rel=0.01)
+    assert b1["H"]["ci95"][0] <= b1["H"]["calibrated_value"] <= b1["H"]["ci95"][1]
+    after = u["B1_G1"]["per_event"][0]["after_rms_percent_mbase"]
+    before = u["B1_G1"]["per_event"][0]["before_rms_percent_mbase"]
+    assert after["P_t"] < 0.5 * before["P_t"]
+    cal = jd.read_dyr(tmp_path / "val" / "calibrated.dyr")
+    genrou = [r for r in cal.records if r.model == "GENROU" and r.bus == 1]
+    assert len(genrou) == 1 and genrou[0]["H"] == pytest.approx(b1["H"]["calibrated_value"], rel=1e-5)
+    # the round trip: the fleet on the case plus the calibrated records
+    fleet_text = path.read_text().replace('dyr = "case.dyr"', 'dyr = ["case.dyr", "val/calibrated.dyr"]')
+    (tmp_path / "again.toml").write_text(fleet_text)
+    assert main(["fleet", str(tmp_path / "again.toml"), "--out", str(tmp_path / "again")]) == 0
+    again = {e["name"]: e for e in json.loads((tmp_path / "again" / "fleet.json").read_text())["units"]}
+    rms = again["B1_G1"]["playback_rms_percent_mbase"]
+    assert rms["P_t"] == pytest.approx(after["P_t"], rel=1e-3, abs=1e-5)
+    assert rms["Q_t"] == pytest.approx(after["Q_t"], rel=1e-3, abs=1e-5)
+    assert np.isfinite(rms["P_t"])

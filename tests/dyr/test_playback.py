@@ -1,0 +1,316 @@
+"""Tests of the composed unit (src/jaxdse/_dyr/unit.py) and its playback (playback.py).
+
+* DyrUnit: machine alone, GENROU + SEXS + TGOV1 and GENROU + IEEEX1 + IEEEST + IEEEG1 start in
+  a steady state (zero vector field) and lay out their states as ``sizes`` says;
+* playback of a constant terminal voltage stays at the initial operating point;
+* the round trip: a recording made here by simulating the unit against an infinite bus through
+  a reactance (our own RK4 loop and network algebra, not jaxdse's playback), then played back
+  with that terminal voltage imposed, gives back the simulated P and Q;
+* ``voltage_steps`` finds a switching step and not a frequency offset or noise; vmap over stacked
+  units equals single calls; a NaN in the data gives ``ok`` False, not an exception.
+
+Recordings are 10 s at 60 frames/s (601 frames) throughout, so that one compiled playback serves
+every test of one unit structure.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxdse._core.governor import IEEEG1, TGOV1
+from jaxdse._dyr.calibrate import Events, ParameterSpec, noise_level, with_values
+from jaxdse._dyr.exciter import exciter_from_dyr
+from jaxdse._dyr.machine import GENCLS, GENROU, GENSAL
+from jaxdse._dyr.playback import (
+    PlaybackSettings,
+    TerminalSeries,
+    initial_operating_point,
+    play_back,
+    voltage_steps,
+)
+from jaxdse._dyr.stabiliser import stabiliser_from_dyr
+from jaxdse._dyr.unit import DyrUnit, UnitInputs
+
+FPS = 60.0
+N_FRAMES = 601                       # 10 s
+ROU = dict(td0_1_s=6.5, td0_2_s=0.06, tq0_1_s=0.2, tq0_2_s=0.05, h_s=4.0, d_pu=0.0, xd_pu=1.8,
+           xq_pu=1.75, xd1_pu=0.6, xq1_pu=0.8, x2_pu=0.23, xl_pu=0.15, s10=0.09, s12=0.38)
+SEXS = (0.1, 10.0, 100.0, 0.05, 0.0, 5.0)                                     # ieee14-style
+IEEEX1 = (0, 50, 0.06, 0, 0, 1, -1, -0.02, 0.5, 0.08, 1, 0, 2, 0.0016, 3, 1.73)
+IEEEST = (1, 0, 1.013, 0.013, 0, 0, 1.013, 0.113, 3.0, 0.02, 0, 0, 1.65, 1.65, 3.0, 0.1, -0.1,
+          0, 0)                                                      # wecc240 bus 1333 record
+
+
+def genrou(**kw):
+    return GENROU(**{**ROU, **kw})
+
+
+def tgov1(**kw):
+    return TGOV1(**{**dict(r_pu=0.05, t1_s=0.05, v_max_pu=1.05, v_min_pu=0.3, t2_s=1.0,
+                           t3_s=2.1), **kw})
+
+
+def sexs_unit(h_s=4.0, k=100.0, r_pu=0.05):
+    sexs = exciter_from_dyr("SEXS", SEXS[:2] + (k,) + SEXS[3:])
+    return DyrUnit(machine=genrou(h_s=h_s, ra_pu=0.003), exciter=sexs, governor=tgov1(r_pu=r_pu))
+
+
+UNITS = {
+    "GENROU alone": lambda: DyrUnit(machine=genrou()),
+    "GENSAL alone": lambda: DyrUnit(machine=GENSAL(
+        td0_1_s=5.0, td0_2_s=0.05, tq0_2_s=0.1, h_s=3.0, d_pu=0.5, xd_pu=1.1, xq_pu=0.7,
+        xd1_pu=0.3, x2_pu=0.25, xl_pu=0.15, s10=0.1, s12=0.3)),
+    "GENCLS alone": lambda: DyrUnit(machine=GENCLS(h_s=5.0, d_pu=1.0, x1_pu=0.3)),
+    "GENROU + SEXS + TGOV1": sexs_unit,
+    "GENROU + IEEEX1 + IEEEST + IEEEG1": lambda: DyrUnit(
+        machine=genrou(ra_pu=0.002), exciter=exciter_from_dyr("IEEEX1", IEEEX1),
+        stabiliser=stabiliser_from_dyr("IEEEST", IEEEST), governor=IEEEG1()),
+}
+SIZES = {"GENROU alone": (6, 0, 0, 0), "GENSAL alone": (5, 0, 0, 0), "GENCLS alone": (3, 0, 0, 0),
+         "GENROU + SEXS + TGOV1": (6, 2, 0, 2), "GENROU + IEEEX1 + IEEEST + IEEEG1": (6, 6, 7, 6)}
+
+
+def inputs_at(vm, ang):
+    return UnitInputs(*(jnp.asarray(x, float) for x in (vm * np.cos(ang), vm * np.sin(ang), 0.0,
+                                                        0.0)))
+
+
+def current(vm, ang, p, q):
+    i = np.conj((p + 1j * q) / (vm * np.exp(1j * ang)))
+    return i.real, i.imag
+
+
+# --- DyrUnit ------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("op", [(1.02, 0.2, 0.7, 0.25), (0.98, -0.3, 0.45, -0.1)])
+@pytest.mark.parametrize("name", list(UNITS))
+def test_unit_initial_state_is_steady(name, op):
+    unit = UNITS[name]()
+    u = inputs_at(*op[:2])
+    y0, refs = unit.initial_state(u, *current(*op))
+    assert unit.sizes == SIZES[name]
+    assert y0.shape == (sum(unit.sizes),)
+    parts = unit.split(y0)
+    assert tuple(len(p) for p in parts) == unit.sizes
+    np.testing.assert_array_equal(jnp.concatenate(parts), y0)
+    ms = unit.machine.steady_state(u.v_re_pu, u.v_im_pu, *current(*op))
+    np.testing.assert_array_equal(parts[0], ms.state)
+    np.testing.assert_allclose(refs.efd0_pu, ms.efd_pu, rtol=0, atol=1e-14)
+    np.testing.assert_allclose(refs.tm0_pu, ms.tm_pu, rtol=0, atol=1e-14)
+    out, efd, tm, vs = unit.signals(y0, u, refs)
+    np.testing.assert_allclose([efd, tm, vs], [refs.efd0_pu, refs.tm0_pu, 0.0], rtol=0, atol=1e-12)
+    np.testing.assert_allclose([out.p_pu, out.q_pu], op[2:], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(unit.vector_field(y0, u, refs), 0.0, rtol=0, atol=1e-12)
+
+
+# --- playback ------------------------------------------------------------------------------
+
+PLAY = eqx.filter_jit(play_back)
+TS = np.arange(N_FRAMES) / FPS
+
+
+def series_of(v, i):
+    """TerminalSeries of complex V and I per frame (network frame, machine base)."""
+    return TerminalSeries(*(jnp.asarray(x, float) for x in (
+        TS, np.abs(v), np.unwrap(np.angle(v)), i.real, i.imag)))
+
+
+def test_constant_voltage_plays_back_the_operating_point():
+    unit = sexs_unit()
+    vm, ang, p, q = 1.02, 0.2, 0.7, 0.25
+    v = np.full(N_FRAMES, vm * np.exp(1j * ang))
+    i = np.full(N_FRAMES, complex(*current(vm, ang, p, q)))
+    r = PLAY(unit, series_of(v, i))
+    assert bool(r.ok)
+    np.testing.assert_allclose(r.p_pu, p, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(r.q_pu, q, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(r.omega_pu, 1.0, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(r.tm_pu, r.references.tm0_pu, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(r.efd_pu, r.references.efd0_pu, rtol=0, atol=1e-10)
+
+
+def test_initial_operating_point_is_relative_to_the_first_angle():
+    # phasors rotating together at a 0.1 Hz offset: I relative to V is constant
+    rot = np.exp(1j * 2 * np.pi * 0.1 * TS)
+    v0, i0 = 1.01 * np.exp(0.4j), 0.6 - 0.3j
+    u0, i_re, i_im = initial_operating_point(series_of(v0 * rot, i0 * rot), PlaybackSettings())
+    np.testing.assert_allclose([u0.v_re_pu, u0.v_im_pu], [v0.real, v0.imag], atol=1e-14)
+    np.testing.assert_allclose([i_re, i_im], [i0.real, i0.imag], atol=1e-14)
+
+
+# The round trip: GENROU + SEXS + TGOV1 behind X_E = 0.15 pu from an infinite bus whose voltage
+# moves from E0 to 0.95 E0 e^{-j 0.08} along a raised cosine over t = 1..2 s (smooth: the
+# playback interpolates |V| and its angle linearly between frames, so a switching step would
+# leave the fast subtransient response between two frames unseen, ~4e-3 pu of P).
+X_E = 0.15
+OP = (1.02, 0.2, 0.7, 0.25)
+SUBSTEPS_REF = 8
+
+
+def _bus(t, e0, e1):
+    s = jnp.clip(t - 1.0, 0.0, 1.0)
+    w = 0.5 - 0.5 * jnp.cos(jnp.pi * s)
+    return e0.real + w * (e1.real - e0.real), e0.imag + w * (e1.imag - e0.imag)
+
+
+def _terminal_voltage(unit, y, eb_re, eb_im):
+    """V = Eb + j X_E I(V): the machine's current is affine in V (real-linear: it is
+    (E'' - V)/(Ra + jX'') turned by the rotor angle), so I(V) = I(0) + A [V_re, V_im] with A
+    from two evaluations, and V solves a 2 x 2 linear system."""
+    y_m = y[:unit.machine.n_states]
+
+    def cur(vr, vi):
+        o = unit.machine.terminal(y_m, jnp.asarray(vr), jnp.asarray(vi))
+        return jnp.stack([o.i_re_pu, o.i_im_pu])
+
+    c0 = cur(0.0, 0.0)
+    a = jnp.stack([cur(1.0, 0.0) - c0, cur(0.0, 1.0) - c0], axis=1)
+    m = jnp.eye(2) + X_E * jnp.stack([a[1], -a[0]])
+    return jnp.linalg.solve(m, jnp.stack([eb_re - X_E * c0[1], eb_im + X_E * c0[0]]))
+
+
+def simulate_against_bus(unit):
+    """(V, I, P, Q) per frame of ``unit`` against the moving infinite bus: a NumPy RK4 loop
+    (SUBSTEPS_REF steps per frame) over a jitted right-hand side."""
+    vm, ang, p, q = OP
+    v0 = vm * np.exp(1j * ang)
+    i0 = complex(*current(*OP))
+    e0 = v0 - 1j * X_E * i0
+    e1 = 0.95 * np.exp(-0.08j) * e0
+    y0, refs = unit.initial_state(inputs_at(vm, ang), i0.real, i0.imag)
+    zero = jnp.zeros(())
+
+    def f(y, t):
+        v = _terminal_voltage(unit, y, *_bus(t, e0, e1))
+        return unit.vector_field(y, UnitInputs(v[0], v[1], zero, zero), refs)
+
+    @jax.jit
+    def rk4(y, t, h):
+        k1 = f(y, t)
+        k2 = f(y + 0.5 * h * k1, t + 0.5 * h)
+        k3 = f(y + 0.5 * h * k2, t + 0.5 * h)
+        k4 = f(y + h * k3, t + h)
+        return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+
+    @jax.jit
+    def measure(y, t):
+        v = _terminal_voltage(unit, y, *_bus(t, e0, e1))
+        o = unit.machine.terminal(y[:unit.machine.n_states], v[0], v[1])
+        return jnp.stack([v[0], v[1], o.i_re_pu, o.i_im_pu, o.p_pu, o.q_pu, y[5]])
+
+    h = 1.0 / (FPS * SUBSTEPS_REF)
+    y, rows = np.asarray(y0), []
+    for k in range(N_FRAMES):
+        rows.append(np.asarray(measure(y, TS[k])))
+        if k < N_FRAMES - 1:
+            for j in range(SUBSTEPS_REF):
+                y = np.asarray(rk4(y, TS[k] + j * h, h))
+    rec = np.array(rows)
+    return (rec[:, 0] + 1j * rec[:, 1], rec[:, 2] + 1j * rec[:, 3], rec[:, 4], rec[:, 5],
+            rec[:, 6])
+
+
+@pytest.fixture(scope="module")
+def recording():
+    unit = sexs_unit()
+    v, i, p, q, omega = simulate_against_bus(unit)
+    return unit, series_of(v, i), p, q, omega
+
+
+ROUND_TRIP_TOL_PU = 1e-4
+"""Round trip, 60 frames/s, 4 Tsit5 steps per frame: max |error| of P and Q [pu]. What is
+left (3.7e-5 in P, 1.0e-5 in Q) is the linear interpolation of |V| and its angle between frames;
+the reference's own integration error is below 1e-9 (same result at 4, 8 and 16 RK4 steps)."""
+
+
+def test_round_trip_reproduces_simulated_power(recording):
+    unit, series, p, q, omega = recording
+    # the recording is not trivial: Q moves by 0.3 pu, P and the speed swing
+    assert np.ptp(q) > 0.25 and np.ptp(p) > 0.01 and np.ptp(omega) > 3e-4
+    r = PLAY(unit, series)
+    assert bool(r.ok)
+    assert r.p_pu.shape == (N_FRAMES,)
+    np.testing.assert_allclose(r.p_pu, p, rtol=0, atol=ROUND_TRIP_TOL_PU)
+    np.testing.assert_allclose(r.q_pu, q, rtol=0, atol=ROUND_TRIP_TOL_PU)
+    np.testing.assert_allclose(r.omega_pu, omega, rtol=0, atol=1e-6)
+    # and a wrong model does not: the round trip can tell H = 4 s from H = 3 s, K = 100 from 50
+    for wrong in (sexs_unit(h_s=3.0), sexs_unit(k=50.0)):
+        rw = PLAY(wrong, series)
+        err = max(np.max(np.abs(np.asarray(rw.p_pu) - p)), np.max(np.abs(np.asarray(rw.q_pu) - q)))
+        assert err > 5 * ROUND_TRIP_TOL_PU
+
+
+def test_vmap_over_stacked_units_equals_single_calls(recording):
+    _, series, _, _, _ = recording
+    units = [sexs_unit(), sexs_unit(h_s=3.0, k=60.0), sexs_unit(h_s=5.5, r_pu=0.04)]
+    stacked = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *units)
+    batched = eqx.filter_jit(eqx.filter_vmap(play_back, in_axes=(0, None)))(stacked, series)
+    assert batched.p_pu.shape == (3, N_FRAMES)
+    for k, unit in enumerate(units):
+        single = PLAY(unit, series)
+        for name in ("p_pu", "q_pu", "omega_pu", "delta_rad", "efd_pu", "tm_pu"):
+            np.testing.assert_allclose(getattr(batched, name)[k], getattr(single, name),
+                                       rtol=1e-10, atol=1e-12, err_msg=name)
+        assert bool(batched.ok[k]) and bool(single.ok)
+
+
+@pytest.mark.parametrize("where", ["v_mag_pu mid-recording", "i_re_pu in the first frames"])
+def test_nan_in_the_data_is_not_ok_and_does_not_raise(recording, where):
+    unit, series, _, _, _ = recording
+    field, _ = where.split(" ", 1)
+    k = 300 if "mid" in where else 3
+    bad = series._replace(**{field: getattr(series, field).at[k].set(jnp.nan)})
+    r = PLAY(unit, bad)
+    assert not bool(r.ok)
+
+
+# --- voltage_steps --------------------------------------------------------------------------
+
+def steps_of(v):
+    return np.asarray(voltage_steps(series_of(v, np.zeros_like(v)), PlaybackSettings()))
+
+
+def test_voltage_steps_finds_a_planted_step(rng):
+    v = 1.0 + 1e-3 * (rng.normal(size=N_FRAMES) + 1j * rng.normal(size=N_FRAMES))
+    v[201:] *= 0.9 * np.exp(-0.1j)                         # switched between frames 200 and 201
+    steps = steps_of(v * np.exp(1j * 2 * np.pi * 0.1 * TS))
+    assert steps.shape == (N_FRAMES - 1,)
+    assert np.flatnonzero(steps).tolist() == [200]
+
+
+def test_voltage_steps_ignores_frequency_offset_and_noise(rng):
+    offset = 1.02 * np.exp(1j * (0.3 + 2 * np.pi * 0.1 * TS))     # steady 0.1 Hz offset
+    noise = 1.0 + 1e-3 * (rng.normal(size=N_FRAMES) + 1j * rng.normal(size=N_FRAMES))
+    assert not steps_of(offset).any()
+    assert not steps_of(noise).any()
+    assert not steps_of(offset * noise).any()
+
+
+# --- calibration helpers ----------------------------------------------------------------------
+
+def test_with_values_sets_fields():
+    unit = sexs_unit()
+    specs = [ParameterSpec("machine", "h_s", "H", 1.0, 10.0),
+             ParameterSpec("exciter", "k", "K", 10.0, 400.0),
+             ParameterSpec("governor", "r_pu", "R", 0.01, 0.1)]
+    new = with_values(unit, specs, [5.5, 150.0, 0.04])
+    assert [float(s.value(new)) for s in specs] == [5.5, 150.0, 0.04]
+    assert [float(s.value(unit)) for s in specs] == [4.0, 100.0, 0.05]      # not in place
+    assert float(new.machine.xd_pu) == ROU["xd_pu"]
+    assert jax.tree_util.tree_structure(new) == jax.tree_util.tree_structure(unit)
+
+
+def test_noise_level_of_white_noise_and_floor_on_a_ramp(rng):
+    n = 2000
+    p = 0.7 + 0.01 * rng.normal(size=(2, n))
+    q = 0.2 + 0.01 * rng.normal(size=(2, n))
+    ev = Events(series=None, p_pu=jnp.asarray(p), q_pu=jnp.asarray(q), weight=jnp.ones((2, n)))
+    sigma = noise_level(ev, 1e-3)
+    assert sigma.shape == (2,)
+    np.testing.assert_allclose(sigma, 0.01, rtol=0.2)
+    ramp = np.linspace(0.0, 1.0, n)[None, :]
+    ev = Events(series=None, p_pu=jnp.asarray(0.5 + ramp), q_pu=jnp.asarray(0.1 - 0.3 * ramp),
+                weight=jnp.ones((1, n)))
+    np.testing.assert_array_equal(noise_level(ev, 1e-3), [1e-3, 1e-3])
