@@ -39,6 +39,37 @@ def block() -> str:
             f"Of the event recordings within 5 % of the truth, {bench['sharpness']['events']['identified']} of "
             f"{bench['sharpness']['events']['within_5pct']} are `identified` (all recordings: "
             f"{bench['sharpness']['all']['identified']} of {bench['sharpness']['all']['within_5pct']}).")
+    pb = load("experiments/andes_bench/playback.json")
+    if pb:
+        s = pb["summary"]
+        out.append(
+            f"- **.dyr playback against ANDES** (`experiments/andes_bench/playback.md`, `python "
+            f"experiments/andes_bench/playback.py`): {s['played_back']} machine-recordings (ieee14, npcc, "
+            f"wecc; line trip, load step, gen trip), each unit's own records with ANDES's terminal voltage "
+            f"imposed: median RMS error P {s['median_rms_P_percent_mbase']:.4f} %, Q "
+            f"{s['median_rms_Q_percent_mbase']:.4f} % of MBASE, largest P {s['max_rms_P_percent_mbase']:.3f} %, "
+            f"Q {s['max_rms_Q_percent_mbase']:.3f} %; event-window peak error within 10 % of the measured "
+            f"peak deviation for {s['event_peak_within_10_percent']}; rotor angle within 0.5 deg for "
+            f"{s['angle_within_0.5_deg']}.")
+    cal = load("experiments/andes_bench/calibration.json")
+    if cal:
+        s = cal["summary"]
+        out.append(
+            f"- **Calibration of planted .dyr errors** (`experiments/andes_bench/calibration.md`): "
+            f"{s['machines']} machines, H, exciter gain and droop planted wrong, three events jointly: "
+            f"H within 1 % for {s['H_within_1_percent_noise_free']}, every identifiable parameter within "
+            f"10 % for {s['identifiable_within_10_percent']}; 95 % intervals cover the truth in "
+            f"{s['coverage_percent_all']:.1f} % of {s['noisy_draws']} noisy draws (H: "
+            f"{s['coverage_percent_H']:.1f} %).")
+    osl = load("experiments/naspi_osl_case1/dyr_playback.json")
+    if osl:
+        s = osl["summary"]
+        out.append(
+            f"- **OSL case 1, .dyr against surrogate playback** (`experiments/naspi_osl_case1/dyr_playback.md`): "
+            f"median RMS error of Q {s['median_rms_Q_percent_mbase']['dyr']:.2f} % of MBASE with the "
+            f".dyr records, {s['median_rms_Q_percent_mbase']['surrogate']:.2f} % with the surrogate; "
+            f"plants passing the windowed criteria: {s['pass_windows']['dyr']} (.dyr), "
+            f"{s['pass_windows']['surrogate']} (surrogate) of {s['plants']}.")
     naspi = load("experiments/naspi_osl_case1/results.json")
     if naspi:
         rows = [r for r in naspi["plants"] if r.get("H_s") is not None]
@@ -79,6 +110,13 @@ def block() -> str:
                      f"error {v['a2_error_percent_median_abs']:.3f} %")
         out.append(line + f". Peak memory {tb['peak_rss_gib_1h_x1024']:.2f} GiB for 1 h x 1024 "
                    f"configurations, {tb['peak_rss_gib_24h_chunked']:.2f} GiB for a 24 h recording streamed.")
+        dp = tb.get("dyr_playback")
+        if dp:
+            out.append(f"- **.dyr playback cost** (`benchmarks/dyr_playback.py`): a 70 s event at 60 frames/s "
+                       f"in a vmapped batch of {dp['playback']['units']} units, "
+                       f"{dp['playback']['per_unit_s']:.3f} s per unit (compile apart; first call "
+                       f"{dp['playback']['first_call_s']:.1f} s); a 3-event ranking and calibration of one "
+                       f"unit {dp['calibration']['wall_s']:.0f} s (first run {dp['calibration']['first_run_s']:.0f} s).")
         fs = tb.get("fleet_scaling")
         if fs:
             out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "

@@ -104,13 +104,14 @@ def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterS
 
 # --- events -----------------------------------------------------------------------------------
 
-def _event_series(fleet: Fleet, p: FleetPlant, file: str, tables: dict):
-    """The plant's TerminalSeries (machine base) from one recording file."""
-    spec = dataclasses.replace(p.run.measurement, file=(file,))
-    if file not in tables:
-        tables[file] = load_table([file], spec.format, csv_options=spec.csv_options,
-                                  time_column=spec.columns.get("time"))
-    segments, _ = condition(tables[file], spec, p.run.plant.machine)
+def _event_series(fleet: Fleet, p: FleetPlant, files: tuple, tables: dict):
+    """The plant's TerminalSeries (machine base) from one recording (a file, or the files
+    that share one time axis as [measurement] file lists them)."""
+    spec = dataclasses.replace(p.run.measurement, file=tuple(files))
+    if files not in tables:
+        tables[files] = load_table(list(files), spec.format, csv_options=spec.csv_options,
+                                   time_column=spec.columns.get("time"))
+    segments, _ = condition(tables[files], spec, p.run.plant.machine)
     t0, rec = segments[0][0], segments[0][1]
     fe = jax.jit(front_end)(rec, p.run.plant, fleet.settings)
     s = fe.v_t * jnp.conj(fe.i_t)
@@ -142,7 +143,8 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     out_dir = Path(out_dir)
     (out_dir / "units").mkdir(parents=True, exist_ok=True)
     opts = fleet.calibrate
-    files = [str(f) for f in fleet.plants[0].run.measurement.file] + [str(e) for e in opts.events]
+    recordings = [tuple(str(f) for f in fleet.plants[0].run.measurement.file)] + [(str(e),) for e in opts.events]
+    files = [" + ".join(r) for r in recordings]
     playback = PlaybackSettings(substeps=fleet.playback.substeps, solver=fleet.playback.solver)
     fit_settings = PlaybackSettings(substeps=opts.substeps, solver=fleet.playback.solver)
     cal = CalibrationSettings(max_relative_ci=opts.max_relative_ci,
@@ -161,7 +163,7 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
             continue
         um = pm.units[0]
         try:
-            series = [_event_series(fleet, p, f, tables)[0] for f in files]
+            series = [_event_series(fleet, p, r, tables)[0] for r in recordings]
         except InputError as err:
             entry["skipped"] = str(err)
             units.append(entry)

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .playback import PlaybackSettings, TerminalSeries, play_back
+from .playback import PlaybackSettings, TerminalSeries, play_back, voltage_steps
 from .unit import DyrUnit
 
 Z95 = 1.959963984540054
@@ -92,11 +92,25 @@ def measured_pq(series: TerminalSeries):
     return vr * series.i_re_pu + vi * series.i_im_pu, vi * series.i_re_pu - vr * series.i_im_pu
 
 
-def stack_events(series_list, weights=None) -> Events:
-    """Stack terminal series of equal length into :class:`Events`."""
+STEP_FRAMES = 3
+"""Frames after a switching step left out of the fit: inside one frame interval the machine's
+fast (subtransient) response to a step is invisible to a playback from frames, so the first
+frames after it carry an error that no parameter value explains (and that would pull H)."""
+
+
+def stack_events(series_list, weights=None, step_frames: int = STEP_FRAMES) -> Events:
+    """Stack terminal series of equal length into :class:`Events`; the ``step_frames`` frames
+    after each voltage step (:func:`~jaxdse._dyr.playback.voltage_steps`) get weight 0."""
     series = jax.tree.map(lambda *x: jnp.stack(x), *series_list)
     p, q = jax.vmap(measured_pq)(series)
     w = jnp.ones_like(p) if weights is None else jnp.asarray(weights, dtype=p.dtype)
+    if step_frames > 0:
+        steps = jax.vmap(lambda s: voltage_steps(s, PlaybackSettings()))(series)
+        after = jnp.pad(steps, ((0, 0), (1, 0)))            # frame k+1 follows interval k
+        hit = jnp.zeros_like(after)
+        for k in range(step_frames):
+            hit = hit | jnp.pad(after, ((0, 0), (k, 0)))[:, :after.shape[1]]
+        w = jnp.where(hit, 0.0, w)
     return Events(series, p, q, w)
 
 

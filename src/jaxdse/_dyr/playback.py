@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .._core.lti import zero_phase_lowpass
 from .unit import DyrUnit, UnitInputs, UnitReferences
 
 
@@ -30,8 +31,12 @@ class PlaybackSettings(eqx.Module):
     (L-stable) with an adaptive step, for units with faster blocks."""
     substeps: int = eqx.field(static=True, default=4)
     """Fixed steps per recording frame ("tsit5"): 4 at 60 frames/s is PSS/E's half-cycle step."""
-    init_s: float = eqx.field(static=True, default=0.25)
+    init_s: float = eqx.field(static=True, default=0.5)
     """The initial steady state is the power flow averaged over this first stretch [s]."""
+    settle_s: float = eqx.field(static=True, default=1.0)
+    """A voltage step within this first stretch [s] is a start-up artefact of the recording
+    (a flat start, a re-initialised PMU): the frames before it are replaced by the first
+    frame after it, so that the unit starts where the recording is steady."""
     rtol: float = eqx.field(static=True, default=1e-7)
     """Relative tolerance ("kvaerno5")."""
     atol: float = eqx.field(static=True, default=1e-9)
@@ -42,6 +47,11 @@ class PlaybackSettings(eqx.Module):
     switching step, held from the frame after it, not a ramp."""
     step_factor: float = eqx.field(static=True, default=10.0)
     """See ``step_ratio`` and :func:`voltage_steps`."""
+    input_filter_hz: float = eqx.field(static=True, default=0.0)
+    """Low-pass the imposed |V| and angle at this cut-off [Hz] (zero-phase 2nd-order
+    Butterworth, the switching steps kept sharp); 0: off. Measurement noise on V drives the
+    model (an exciter answers every jitter of the recorded voltage) and biases a calibration
+    towards parameters that damp the response to it; 5 Hz keeps the electromechanical band."""
 
 
 class TerminalSeries(NamedTuple):
@@ -109,6 +119,13 @@ def voltage_steps(series: TerminalSeries, settings: PlaybackSettings):
     return (dv > settings.step_ratio * near) & (dv > settings.step_factor * noise)
 
 
+def _filtered(x, step, dt, cutoff_hz):
+    """``x`` low-passed at zero phase with its steps (at ``step`` intervals) taken out first and
+    put back after, so that a switching event stays a step."""
+    jumps = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(jnp.where(step, jnp.diff(x), 0.0))])
+    return zero_phase_lowpass(x - jumps, dt, cutoff_hz) + jumps
+
+
 def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s):
     """t -> UnitInputs: |V| and its angle linear between frames, except across a voltage step,
     where the frame after the step holds over the whole interval (a switching event happens
@@ -119,6 +136,8 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
     dt = ts[1] - ts[0]
     step = voltage_steps(series, settings)
     n = ts.shape[0]
+    if settings.input_filter_hz > 0:
+        vm, th = (_filtered(x, step, dt, settings.input_filter_hz) for x in (vm, th))
 
     def inputs(t):
         k = jnp.clip(jnp.ceil((t - ts[0]) / dt - 1e-9).astype(int) - 1, 0, n - 2)
@@ -131,9 +150,21 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
     return inputs
 
 
+def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> TerminalSeries:
+    """``series`` with the frames before the last voltage step of its first ``settle_s``
+    replaced by the frame after that step (unchanged when there is none)."""
+    n = series.t_s.shape[0]
+    k = jnp.arange(n - 1)
+    early = voltage_steps(series, settings) & (series.t_s[1:] - series.t_s[0] <= settings.settle_s)
+    start = jnp.max(jnp.where(early, k + 1, 0))
+    keep = jnp.arange(n) >= start
+    return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
+
+
 def play_back(unit: DyrUnit, series: TerminalSeries,
               settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
     """Simulate ``unit`` with the recorded terminal voltage imposed (PLBVFU1 convention)."""
+    series = steady_start(series, settings)
     ts = series.t_s
     omega_s = unit.machine.omega_s_rad_s
     u0, i_re0, i_im0 = initial_operating_point(series, settings)
@@ -171,4 +202,4 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
 
 
 __all__ = ["PlaybackResult", "PlaybackSettings", "TerminalSeries", "initial_operating_point",
-           "play_back"]
+           "play_back", "steady_start", "voltage_steps"]
