@@ -7,7 +7,14 @@
   environment (``JAX_COMPILATION_CACHE_DIR``).
 * Recordings of a few fixed lengths and the compiled estimator, built once per session:
   compiling the whole pipeline costs seconds, so tests reuse these shapes (20 s, 60 s and
-  120 s at 50 frames/s; 60 s at 25 frames/s for the file-based tests).
+  120 s at 50 frames/s; 60 s and its first 50 s at 25 frames/s for the file-based tests and
+  the runner). A suite run compiles each pipeline shape once: the shapes below, and those of
+  ``jaxdse run`` on the 60 s recording (padded to 1536 samples) and on two parts of 1250
+  samples (1280 each), are shared across modules.
+* pytest-xdist is not used by default (on 2 shared cores it measured slower: each worker
+  simulates and compiles the session fixtures again). Where it is installed, ``-n 2 --dist
+  loadscope`` keeps each module, and the modules that share compiled shapes or session runs
+  (``SHARED``, ``xdist_scope``), on one worker.
 """
 
 import os
@@ -16,8 +23,7 @@ from pathlib import Path
 import jax
 
 ROOT = Path(__file__).resolve().parents[1]
-CACHE = ROOT / ".jax_cache"
-os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(CACHE))
+CACHE = Path(os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(ROOT / ".jax_cache")))
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 jax.config.update("jax_compilation_cache_dir", str(CACHE))
@@ -60,6 +66,45 @@ def pmu25(plant):
 
 
 @pytest.fixture(scope="session")
+def cut25(pmu25):
+    """The first 1251 samples (50 s) of ``pmu25``: the unit-alone shape of ``assess_jit``
+    (padded to 1280 samples in a batch, as the two parts of `jaxdse run`'s split-recording
+    test are)."""
+    return cut(pmu25.recording, 1251)
+
+
+@pytest.fixture(scope="session")
+def assess_jit():
+    """``jd.assess`` of one unit with the test settings (``jaxdse run``'s: trajectories kept,
+    4 bootstrap draws), compiled once: the runner's, the vmap guard's and the verdict tests'
+    unit-alone runs share it (on ``cut25``'s shape)."""
+    from builders import TEST_BOOTSTRAP_DRAWS
+
+    return jax.jit(lambda r, p: jd.assess(r, p, jd.ObserverConfig(), jd.Settings(),
+                                          jd.IdentifySettings(bootstrap_draws=TEST_BOOTSTRAP_DRAWS)))
+
+
+@pytest.fixture(scope="session")
+def isone_run(tmp_path_factory):
+    """``jaxdse run examples/isone_mat.toml`` on the REAL ISO-NE recording, once, in-process:
+    (exit status, stderr, summary.json). The CLI test and the results-regression tests read it."""
+    import contextlib
+    import io
+    import json
+
+    from jaxdse._app.cli import main
+
+    if not (SHARED_DATA / "isone_oscillation" / "case3row.mat").exists():
+        pytest.skip("the shared ISO-NE recording is not beside the checkout")
+    out = tmp_path_factory.mktemp("isone")
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+        rc = main(["run", str(ROOT / "examples" / "isone_mat.toml"), "--out", str(out)])
+    summary = json.loads((out / "summary.json").read_text()) if rc == 0 else None
+    return rc, err.getvalue(), summary
+
+
+@pytest.fixture(scope="session")
 def estimate_jit():
     return jax.jit(jd.estimate)
 
@@ -85,3 +130,40 @@ def demo_run(tmp_path_factory):
     with contextlib.redirect_stdout(printed):
         rc = main(["demo", "--out", str(out)])
     return rc, out, printed.getvalue(), json.loads((out / "summary.json").read_text())
+
+
+SHARED = {
+    "pipeline": ("app/test_bad_input.py", "app/test_run.py", "io/test_fuzz.py", "many/test_runner.py",
+                 "core/test_identify.py"),
+    "isone": ("app/test_isone.py",),
+    "demo": ("app/test_cli.py", "core/test_accuracy.py"),
+}
+"""xdist work units of modules that share compiled pipeline shapes or session runs: `jaxdse run`
+on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``assess_jit`` on
+``cut25`` (pipeline); the ISO-NE run (isone, with test_run's CLI test of it); ``demo_run``
+(demo)."""
+
+
+def xdist_scope(nodeid: str) -> str:
+    """The xdist work unit of a test: its module, or the module's ``SHARED`` group; the CLI
+    test of the ISO-NE config joins the isone group."""
+    path, _, name = nodeid.partition("::")
+    rel = path.removeprefix("tests/")
+    if "isone" in name:
+        return "isone"
+    return next((group for group, paths in SHARED.items() if rel in paths), path)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadscope`` with ``xdist_scope`` as the scope (xdist's own ``loadgroup`` reads
+    marks through ``item._nodeid``, which pytest 9 no longer uses for the node id)."""
+    if config.getvalue("dist") != "loadscope":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SharedScopeScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return xdist_scope(nodeid)
+
+    return SharedScopeScheduling(config, log)

@@ -46,11 +46,17 @@ def test_figures_have_labelled_axes_with_units(ambient, plant, estimate_jit, tmp
     assert any("time [s]" == x for x, _ in labels)
 
 
-def test_help_teaches():
-    """Through the installed console script: the entry point works and --help teaches."""
+def test_help_teaches(tmp_path):
+    """Through the installed console script, in a real process: the entry point works, --help
+    teaches, and bad input is exit status 2 with one line on stderr (the other CLI tests call
+    ``main`` in-process)."""
     exe = shutil.which("jaxdse") or str(Path(sys.executable).parent / "jaxdse")
     res = subprocess.run([exe, "demo", "--help"], capture_output=True, text=True)
     assert res.returncode == 0 and "summary.json" in res.stdout and "example" in res.stdout
+    res = subprocess.run([exe, "run", str(tmp_path / "nope.toml")], capture_output=True, text=True)
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert res.returncode == 2 and len(lines) == 1 and "Traceback" not in res.stderr, res.stderr
+    assert lines[0].startswith("jaxdse: error:") and "nope.toml" in lines[0] and "does not exist" in lines[0]
 
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -33,8 +33,8 @@ def _case(tmp: Path, dyr_text: str, events=("line_trip",), tags=("B1_G1", "B2_G1
     text = (f"[case]\nraw = \"case.raw\"\ndyr = \"case.dyr\"\n\n[measurement]\nfile = \"{files[0]}\"\n"
             "location = \"terminal\"\nvoltage_unit = \"pu\"\ncurrent_unit = \"pu\"\nangle_unit = \"deg\"\n"
             "s_base_mva = 100.0\nmin_segment_s = 10.0\n" + units
-            + "\n[identify]\nbootstrap_draws = 4\n\n[playback]\nmodel = \"dyr\"\n"
-            + (f"\n[calibrate]\nevents = {json.dumps(files[1:])}\nparameters = [\"H\", \"KA\", \"R\"]\n"
+            + "\n[identify]\nenabled = false\n\n[playback]\nmodel = \"dyr\"\n"
+            + (f"\n[calibrate]\nevents = {json.dumps(files[1:])}\nparameters = [\"H\"]\n"
                if len(files) > 1 else ""))
     (tmp / "fleet.toml").write_text(text)
     return tmp / "fleet.toml"

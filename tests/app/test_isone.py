@@ -2,16 +2,12 @@
 experiments/isone_real/results.json still what the code gives (a regression there once landed
 unnoticed)."""
 
-import dataclasses
 import json
 from pathlib import Path
 
 import pytest
 
-import jaxdse as jd
-
 ROOT = Path(__file__).resolve().parents[2]
-CONFIG = ROOT / "examples" / "isone_mat.toml"
 RESULTS = ROOT / "experiments" / "isone_real" / "results.json"
 pytestmark = [pytest.mark.slow,
               pytest.mark.skipif(not (ROOT.parent / "shared" / "data" / "isone_oscillation").exists(),
@@ -19,9 +15,12 @@ pytestmark = [pytest.mark.slow,
 
 
 @pytest.fixture(scope="module")
-def summary(tmp_path_factory):
-    cfg = dataclasses.replace(jd.load_config(CONFIG), figures=False, trajectories=False)
-    return {e["name"]: e for e in jd.run_config(cfg, tmp_path_factory.mktemp("isone"))["recordings"]}
+def summary(isone_run):
+    """`jaxdse run examples/isone_mat.toml`, run once per session (conftest ``isone_run``;
+    test_run's CLI test reads the same run)."""
+    rc, err, doc = isone_run
+    assert rc == 0, err
+    return {e["name"]: e for e in doc["recordings"]}
 
 
 def test_auto_validation_playback_matches_the_measurement(summary):

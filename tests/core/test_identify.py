@@ -51,10 +51,10 @@ def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):
 
 
 @pytest.fixture(scope="module")
-def assessed(short, plant):
-    """A real assessment, its numbers then set to those of a clean, identified unit."""
-    a = jax.jit(lambda r: jd.assess(r, plant, jd.ObserverConfig(), jd.Settings(keep="final"),
-                                    jd.IdentifySettings(bootstrap_draws=4)))(short)
+def assessed(cut25, plant, assess_jit):
+    """A real assessment (the session's compiled ``assess_jit``, on 50 s at 25 frames/s), its
+    numbers then set to those of a clean, identified unit."""
+    a = assess_jit(cut25, plant)
     h = float(a.identified.h_s)
     return _with(a, identified__h_without_damping_s=h, identified__h_without_governor_correction_s=h,
                  identified__relative_ci=0.05, identified__h_ci95=[0.95 * h, 1.05 * h],

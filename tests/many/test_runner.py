@@ -2,71 +2,54 @@
 
 XLA's CPU runtime once deadlocked (every thread idle) on a vmapped identification whose graph
 held LAPACK calls; the per-unit graph now holds none. The guard runs ``jit(vmap(assess))``
-over 16 units with different plants in a subprocess with a timeout, so that a deadlock fails
-the suite instead of hanging it.
+over 16 units with different plants under a watchdog (``faulthandler``): a deadlock ends the
+test process with the threads' tracebacks after ``DEADLOCK_TIMEOUT_S``, so that it fails the
+suite instead of hanging it.
+
+Shapes shared with the rest of the suite (conftest): the units alone are ``assess_jit`` on
+``cut25``'s 1251 samples; the runner's batches are `jaxdse run`'s (1536 samples, one unit; 1280
+samples, two units, as its split-recording test).
 """
 
-import json
-import os
-import subprocess
-import sys
+import faulthandler
 
 import jax
 import numpy as np
 import pytest
+from builders import TEST_BOOTSTRAP_DRAWS
 
 import jaxdse as jd
 
-VMAP_16 = r"""
-import json, sys
-import jax
-jax.config.update("jax_enable_x64", True)
-import numpy as np
-import jaxdse as jd
-
-sim = jd.simulate(jd.Plant(), jd.Scenario(duration_s=24.0, frame_rate_hz=25.0, seed=5))
-plants = [jd.Plant(machine=jd.Machine(xd_pu=1.6 + 0.02 * k, xq_pu=1.5 + 0.01 * k, xd1_pu=0.3 + 0.005 * k),
-                   governor=jd.TGOV1(r_pu=0.04 + 0.002 * k)) for k in range(16)]
-recs = jd.stack([sim.recording] * 16)
-run = jax.jit(jax.vmap(lambda r, p: jd.assess(r, p, jd.ObserverConfig(), jd.Settings(keep="final"),
-                                              jd.IdentifySettings(bootstrap_draws=4))))
-out = run(recs, jd.stack(plants))
-one = jax.jit(lambda r, p: jd.assess(r, p, jd.ObserverConfig(), jd.Settings(keep="final"),
-                                     jd.IdentifySettings(bootstrap_draws=4)))(sim.recording, plants[7])
-print(json.dumps({"h": np.asarray(out.identified.h_s).tolist(),
-                  "ci": np.asarray(out.identified.h_ci95).tolist(),
-                  "code": np.asarray(out.verdict.code).tolist(),
-                  "h7": float(one.identified.h_s), "ci7": np.asarray(one.identified.h_ci95).tolist()}))
-"""
+DEADLOCK_TIMEOUT_S = 420
+"""The watchdog's limit [s]: the guard takes about a minute on 2 busy cores, compiling included."""
 
 
 @pytest.mark.slow
-def test_vmapped_assess_over_16_plants_does_not_deadlock():
-    out = subprocess.run([sys.executable, "-c", VMAP_16], capture_output=True, text=True, timeout=420,
-                         env=dict(os.environ))
-    assert out.returncode == 0, out.stderr[-3000:]
-    res = json.loads(out.stdout.strip().splitlines()[-1])
-    h = np.array(res["h"])
-    assert h.shape == (16,) and np.all(np.isfinite(h)) and np.all(np.isfinite(res["ci"]))
+def test_vmapped_assess_over_16_plants_does_not_deadlock(cut25, assess_jit):
+    plants = [jd.Plant(machine=jd.Machine(xd_pu=1.6 + 0.02 * k, xq_pu=1.5 + 0.01 * k, xd1_pu=0.3 + 0.005 * k),
+                       governor=jd.TGOV1(r_pu=0.04 + 0.002 * k)) for k in range(16)]
+    ids = jd.IdentifySettings(bootstrap_draws=TEST_BOOTSTRAP_DRAWS)
+    run = jax.jit(jax.vmap(lambda r, p: jd.assess(r, p, jd.ObserverConfig(), jd.Settings(), ids)))
+    faulthandler.dump_traceback_later(DEADLOCK_TIMEOUT_S, exit=True)
+    try:
+        out = run(jd.stack([cut25] * 16), jd.stack(plants))
+        one = assess_jit(cut25, plants[7])
+    finally:
+        faulthandler.cancel_dump_traceback_later()
+    h, ci = np.asarray(out.identified.h_s), np.asarray(out.identified.h_ci95)
+    assert h.shape == (16,) and np.all(np.isfinite(h)) and np.all(np.isfinite(ci))
     assert len(set(np.round(h, 9))) > 1, "different plants must give different H"
     # The vmapped member equals the unit run alone (no batch-axis mix-up).
-    np.testing.assert_allclose(h[7], res["h7"], rtol=1e-9)
-    np.testing.assert_allclose(res["ci"][7], res["ci7"], rtol=1e-9)
+    np.testing.assert_allclose(h[7], float(one.identified.h_s), rtol=1e-9)
+    np.testing.assert_allclose(ci[7], np.asarray(one.identified.h_ci95), rtol=1e-9)
 
 
-@pytest.fixture(scope="module")
-def two_lengths(pmu25):
-    rec = pmu25.recording
-    cut = jax.tree_util.tree_map(lambda x: x[:1251], rec)
-    return rec, cut
-
-
-def test_runner_groups_pads_cuts_and_shifts(two_lengths, plant):
+def test_runner_groups_pads_cuts_and_shifts(pmu25, cut25, plant, assess_jit):
     """Units of two lengths and two plants: each result is cut to its own length, shifted to
     its own start, and equals the unit assessed alone (padding is masked)."""
-    full, cut = two_lengths
+    full, cut = pmu25.recording, cut25
     other = jd.Plant(governor=jd.TGOV1(r_pu=0.06))
-    ids = jd.IdentifySettings(bootstrap_draws=4)
+    ids = jd.IdentifySettings(bootstrap_draws=TEST_BOOTSTRAP_DRAWS)
     units = [jd.Unit("a", full, plant), jd.Unit("b", cut, other, t0_s=100.0), jd.Unit("c", cut, plant)]
     seen = []
     out = jd.assess_units(units, jd.ObserverConfig(), jd.Settings(), ids, progress=seen.append)
@@ -74,7 +57,7 @@ def test_runner_groups_pads_cuts_and_shifts(two_lengths, plant):
     assert out[0].estimate.time_s.shape == (1501,) and out[1].estimate.time_s.shape == (1251,)
     assert out[1].replay.playback.p_t_pu.shape == (1251,)
     np.testing.assert_allclose(out[1].estimate.time_s[0], 100.0 + float(cut.t_s[0]))
-    alone = jax.jit(lambda r, p: jd.assess(r, p, jd.ObserverConfig(), jd.Settings(), ids))(cut, other)
+    alone = assess_jit(cut, other)
     np.testing.assert_allclose(out[1].identified.h_s, alone.identified.h_s, rtol=1e-7)
     np.testing.assert_allclose(out[1].identified.h_ci95, alone.identified.h_ci95, rtol=1e-6)
     assert int(out[1].verdict.code) == int(alone.verdict.code)
