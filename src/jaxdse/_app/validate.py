@@ -143,12 +143,13 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     out_dir = Path(out_dir)
     (out_dir / "units").mkdir(parents=True, exist_ok=True)
     opts = fleet.calibrate
-    recordings = [tuple(str(f) for f in fleet.plants[0].run.measurement.file)] + [(str(e),) for e in opts.events]
+    recordings = [tuple(str(f) for f in fleet.plants[0].run.measurement.file)]
+    recordings += [(str(e),) for e in opts.events]
     files = [" + ".join(r) for r in recordings]
     playback = PlaybackSettings(substeps=fleet.playback.substeps, solver=fleet.playback.solver)
     fit_settings = PlaybackSettings(substeps=opts.substeps, solver=fleet.playback.solver)
     cal = CalibrationSettings(max_relative_ci=opts.max_relative_ci,
-                              noise_floor_pu=opts.noise_floor_pu, bound_factor=opts.bound_factor)
+                              noise_floor_pu=opts.noise_floor_pu)
     progress = Progress(len(fleet.plants), stream)
     tables, units, changed = {}, [], []
     for p in fleet.plants:

@@ -66,8 +66,6 @@ class CalibrationSettings:
     noise_floor_pu: float = 1e-3
     """Lower bound of the noise level of P and Q [pu of MBASE] used for the ranking: a PMU's
     P and Q are not better than about 0.1 % (C37.118 TVE), whatever the data's smoothness."""
-    bound_factor: float = 4.0
-    """Default bounds of a positive parameter: [value / factor, value * factor]."""
     rtol: float = 1e-8
     atol: float = 1e-10
     max_steps: int = 64

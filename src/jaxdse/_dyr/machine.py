@@ -120,6 +120,16 @@ def _powers(v_re, v_im, i_re, i_im):
     return v_re * i_re + v_im * i_im, v_im * i_re - v_re * i_im
 
 
+def _stator(psi2d, psi2q, vd, vq, ra, x2):
+    """(i_d, i_q, Te) behind the subtransient flux: (psi''_q + j psi''_d) - (vd + j vq) =
+    (Ra + jX'') (id + j iq); Te = psi_d i_q - psi_q i_d."""
+    ed, eq = psi2q - vd, psi2d - vq
+    den = ra ** 2 + x2 ** 2
+    i_d = (ra * ed + x2 * eq) / den
+    i_q = (ra * eq - x2 * ed) / den
+    return i_d, i_q, (psi2d - x2 * i_d) * i_q + (psi2q + x2 * i_q) * i_d
+
+
 def _check_order(module, ok, message):
     if all(concrete(v) for v in (ok,)) and not bool(jnp.all(ok)):
         raise ValueError(f"{type(module).__name__}: {message}")
@@ -223,13 +233,7 @@ class GENROU(AbstractMachine):
         ra, x2 = self.ra_pu, self.x2_pu
         delta = state[4]
         psi2d, psi2q = self._fluxes(state)
-        vd, vq = to_dq(v_re, v_im, delta)
-        # (psi''_q + j psi''_d) - (vd + j vq) = (Ra + jX'') (id + j iq)
-        ed, eq = psi2q - vd, psi2d - vq
-        den = ra ** 2 + x2 ** 2
-        i_d = (ra * ed + x2 * eq) / den
-        i_q = (ra * eq - x2 * ed) / den
-        te = (psi2d - x2 * i_d) * i_q + (psi2q + x2 * i_q) * i_d
+        i_d, i_q, te = _stator(psi2d, psi2q, *to_dq(v_re, v_im, delta), ra, x2)
         e1q, psi_kd = state[0], state[1]
         k1d, _, _, _, _ = self._k()
         sat = self._sat(psi2d, psi2q)
@@ -333,12 +337,7 @@ class GENSAL(AbstractMachine):
         e1q, psi_kd, psi2q, delta = state[0], state[1], state[2], state[3]
         k1d, k3d = self._k()
         psi2d = k3d * e1q + (1.0 - k3d) * psi_kd
-        vd, vq = to_dq(v_re, v_im, delta)
-        ed, eq = psi2q - vd, psi2d - vq
-        den = ra ** 2 + x2 ** 2
-        i_d = (ra * ed + x2 * eq) / den
-        i_q = (ra * eq - x2 * ed) / den
-        te = (psi2d - x2 * i_d) * i_q + (psi2q + x2 * i_q) * i_d
+        i_d, i_q, te = _stator(psi2d, psi2q, *to_dq(v_re, v_im, delta), ra, x2)
         ifd = (k1d * (e1q - psi_kd - (self.xd1_pu - self.xl_pu) * i_d)
                + (self.xd_pu - self.xd1_pu) * i_d + (1.0 + self._sat(e1q)) * e1q)
         i_re, i_im = from_dq(i_d, i_q, delta)
