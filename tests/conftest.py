@@ -3,8 +3,9 @@
 * float64, and broadcasting that must be explicit (as diffrax's conftest sets it: rank
   promotion raises). Strict dtype promotion does not fit: the phasor arithmetic mixes float64
   arrays with Python complex scalars throughout.
-* A persistent compilation cache in ``.jax_cache/``; subprocesses get it through the
-  environment (``JAX_COMPILATION_CACHE_DIR``).
+* JAX's persistent compilation cache only when ``JAX_COMPILATION_CACHE_DIR`` is set (then
+  subprocesses share it). Off by default: a fresh clone has nothing to read, and a cache
+  write once crashed the interpreter (SIGSEGV in ``put_executable_and_time``, CI, jax 0.10).
 * Recordings of a few fixed lengths and the compiled estimator, built once per session:
   compiling the whole pipeline costs seconds, so tests reuse these shapes (20 s, 60 s and
   120 s at 50 frames/s; 60 s and its first 50 s at 25 frames/s for the file-based tests and
@@ -23,11 +24,11 @@ from pathlib import Path
 import jax
 
 ROOT = Path(__file__).resolve().parents[1]
-CACHE = Path(os.environ.setdefault("JAX_COMPILATION_CACHE_DIR", str(ROOT / ".jax_cache")))
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
-jax.config.update("jax_compilation_cache_dir", str(CACHE))
-jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+    jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
