@@ -6,18 +6,27 @@
 * JAX's persistent compilation cache only when ``JAX_COMPILATION_CACHE_DIR`` is set (then
   subprocesses share it). Off by default: a fresh clone has nothing to read, and a cache
   write once crashed the interpreter (SIGSEGV in ``put_executable_and_time``, CI, jax 0.10).
+* XLA's CPU executables each hold a few memory mappings, and a suite run compiles thousands
+  (every eagerly run operation of a new shape is one). Past the kernel's ``vm.max_map_count``
+  (65530 by default) the next compile segfaults: measured, 40 000 mappings at 60 % of the
+  suite, a crash at 95 %. So after any test that leaves more than ``MAX_MAPPINGS``, the
+  compilation caches are cleared (the shared shapes then compile once more).
 * Recordings of a few fixed lengths and the compiled estimator, built once per session:
   compiling the whole pipeline costs seconds, so tests reuse these shapes (20 s, 60 s and
   120 s at 50 frames/s; 60 s and its first 50 s at 25 frames/s for the file-based tests and
   the runner). A suite run compiles each pipeline shape once: the shapes below, and those of
   ``jaxdse run`` on the 60 s recording (padded to 1536 samples) and on two parts of 1250
   samples (1280 each), are shared across modules.
-* pytest-xdist is not used by default (on 2 shared cores it measured slower: each worker
-  simulates and compiles the session fixtures again). Where it is installed, ``-n 2 --dist
-  loadscope`` keeps each module, and the modules that share compiled shapes or session runs
-  (``SHARED``, ``xdist_scope``), on one worker.
+* The suite compiles far more than it runs, so XLA's slow optimisation passes are off
+  (``jax_disable_most_optimizations``; ``JAXDSE_TEST_OPTIMIZE=1`` keeps them): measured on 2
+  cores, the serial suite reached the same test in 12.9 min against 15.5 min.
+* pytest-xdist, one worker per core (``-n auto --dist loadscope`` in pyproject.toml): each
+  module, and the modules that share compiled shapes or session runs (``SHARED``,
+  ``xdist_scope``), stay on one worker, and the longest of them are handed out first
+  (``LONGEST_FIRST``), so that no worker is left with a long module at the end.
 """
 
+import gc
 import os
 from pathlib import Path
 
@@ -26,6 +35,8 @@ import jax
 ROOT = Path(__file__).resolve().parents[1]
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
+if not os.environ.get("JAXDSE_TEST_OPTIMIZE"):
+    jax.config.update("jax_disable_most_optimizations", True)
 if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
@@ -36,6 +47,20 @@ import pytest  # noqa: E402
 import jaxdse as jd  # noqa: E402
 
 SHARED_DATA = ROOT.parent / "shared" / "data"
+MAPS = Path("/proc/self/maps")
+MAX_MAPPINGS = 30000
+"""Memory mappings of this process above which the JAX caches are cleared (Linux only)."""
+
+
+@pytest.fixture(autouse=True)
+def bounded_executables():
+    """Clear JAX's compilation caches when the process holds many mappings (see above)."""
+    yield
+    if MAPS.exists():
+        with MAPS.open("rb") as fh:
+            if sum(1 for _ in fh) > MAX_MAPPINGS:
+                jax.clear_caches()
+                gc.collect()
 
 
 def cut(rec: jd.Recording, n: int) -> jd.Recording:
@@ -143,6 +168,18 @@ SHARED = {
 on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``assess_jit`` on
 ``cut25`` (pipeline); the ISO-NE run (isone, with test_run's CLI test of it); ``demo_run``
 (demo)."""
+
+
+LONGEST_FIRST = ("tests/many/test_tune.py", "pipeline", "tests/app/test_dyr_playback.py", "isone", "demo",
+                 "tests/app/test_compiles.py", "tests/many/test_batch.py", "tests/many/test_stream.py",
+                 "tests/app/test_fleet.py", "tests/core/test_events.py", "tests/core/test_estimate.py")
+"""Work units that took longest (``--durations``, 2 cores), in that order: run first."""
+
+
+def pytest_collection_modifyitems(items):
+    """The longest work units first (a stable sort: the rest keep their order)."""
+    rank = {scope: k for k, scope in enumerate(LONGEST_FIRST)}
+    items.sort(key=lambda item: rank.get(xdist_scope(item.nodeid), len(LONGEST_FIRST)))
 
 
 def xdist_scope(nodeid: str) -> str:

@@ -5,6 +5,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -123,7 +124,7 @@ def test_sweep_and_tune_commands(tmp_path, capsys, plant):
     train = [jd.read_measurement(g.measurement, g.plant.machine)[0][0][1]
              for g in run.generators if g.role == "auto"]
     tuned = dataclasses.replace(run.observer, **out["observer_tuned"])
-    again = jd.tuning_loss(tuned, jd.stack_recordings(train), run.generators[0].plant,
+    again = eqx.filter_jit(jd.tuning_loss)(tuned, jd.stack_recordings(train), run.generators[0].plant,
                            jd.Settings.fast(), jnp.asarray([25.4174]))
     assert float(again) == pytest.approx(out["loss_tuned"], rel=1e-9)
     assert out["loss_tuned"] < out["loss_start"]

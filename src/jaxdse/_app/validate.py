@@ -112,12 +112,12 @@ def _event_series(fleet: Fleet, p: FleetPlant, files: tuple, tables: dict):
         tables[files] = load_table(list(files), spec.format, csv_options=spec.csv_options,
                                    time_column=spec.columns.get("time"))
     segments, _ = condition(tables[files], spec, p.run.plant.machine)
-    t0, rec = segments[0][0], segments[0][1]
+    rec = segments[0][1]
     fe = jax.jit(front_end)(rec, p.run.plant, fleet.settings)
     s = fe.v_t * jnp.conj(fe.i_t)
     t = np.asarray(rec.t_s)
     return terminal_series(t - t[0], np.abs(np.asarray(fe.v_t)), np.asarray(fe.theta_t),
-                           np.asarray(jnp.real(s)), np.asarray(jnp.imag(s))), t0
+                           np.asarray(jnp.real(s)), np.asarray(jnp.imag(s)))
 
 
 def _pad(series_list):
@@ -164,7 +164,7 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
             continue
         um = pm.units[0]
         try:
-            series = [_event_series(fleet, p, r, tables)[0] for r in recordings]
+            series = [_event_series(fleet, p, r, tables) for r in recordings]
         except InputError as err:
             entry["skipped"] = str(err)
             units.append(entry)

@@ -34,3 +34,14 @@ def check_nonnegative(module, *names: str) -> None:
         value = getattr(module, name)
         if concrete(value) and np.any(~(np.asarray(value) >= 0)):
             raise ValueError(f"{type(module).__name__}.{name} must be >= 0, got {value}")
+
+
+def all_concrete(*values) -> bool:
+    """True when every value is known now (a combination of fields is validated only then)."""
+    return all(concrete(v) for v in values)
+
+
+def check_that(module, ok, message: str) -> None:
+    """``ValueError`` for a concrete parameter combination that is invalid (tracers pass)."""
+    if concrete(ok) and not bool(np.all(np.asarray(ok))):
+        raise ValueError(f"{type(module).__name__}: {message}")

@@ -38,7 +38,7 @@ from .blocks import lag as _lag
 from .blocks import lead_lag as _lead_lag
 from .blocks import safe as _safe
 from .blocks import washout as _washout
-from .fields import as_float, check_nonnegative, check_positive, concrete
+from .fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
 
 
 class AbstractGovernor(eqx.Module):
@@ -61,14 +61,6 @@ class AbstractGovernor(eqx.Module):
         """Torque reference T_ref that holds Tm = ``t_m`` at speed deviation ``dw`` in steady state."""
 
 
-def _check(module, ok: bool | np.ndarray, message: str) -> None:
-    """ValueError for a concrete parameter combination that is invalid (tracers pass)."""
-    if concrete(ok) and not bool(np.all(np.asarray(ok))):
-        raise ValueError(f"{type(module).__name__}: {message}")
-
-
-def _concrete(*values) -> bool:
-    return all(concrete(v) for v in values)
 
 
 
@@ -186,11 +178,11 @@ class IEEEG1(AbstractGovernor):
         check_positive(self, "t3_s", "uo_pu_s")
         check_nonnegative(self, "k", "t1_s", "t2_s", "t4_s", "t5_s", "t6_s", "t7_s",
                           "k1", "k3", "k5", "k7")
-        if _concrete(self.uc_pu_s, self.p_max_pu, self.p_min_pu, self.k1, self.k3, self.k5, self.k7):
-            _check(self, self.uc_pu_s < 0, f"Uc must be < 0, got {self.uc_pu_s}")
-            _check(self, self.p_max_pu >= self.p_min_pu,
+        if all_concrete(self.uc_pu_s, self.p_max_pu, self.p_min_pu, self.k1, self.k3, self.k5, self.k7):
+            check_that(self, self.uc_pu_s < 0, f"Uc must be < 0, got {self.uc_pu_s}")
+            check_that(self, self.p_max_pu >= self.p_min_pu,
                    f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
-            _check(self, self.k_hp > 0, "K1 + K3 + K5 + K7 must be > 0 (single-shaft output)")
+            check_that(self, self.k_hp > 0, "K1 + K3 + K5 + K7 must be > 0 (single-shaft output)")
 
     @property
     def k_hp(self):
@@ -270,8 +262,8 @@ class GAST(AbstractGovernor):
     def __check_init__(self):
         check_positive(self, "r_pu", "t1_s")
         check_nonnegative(self, "t2_s", "t3_s", "kt_pu", "dturb_pu")
-        if _concrete(self.v_max_pu, self.v_min_pu):
-            _check(self, self.v_max_pu >= self.v_min_pu,
+        if all_concrete(self.v_max_pu, self.v_min_pu):
+            check_that(self, self.v_max_pu >= self.v_min_pu,
                    f"VMAX ({self.v_max_pu}) must be >= VMIN ({self.v_min_pu})")
 
     def steady_state(self, t_ref, dw):
@@ -349,8 +341,8 @@ class HYGOV(AbstractGovernor):
     def __check_init__(self):
         check_positive(self, "r_pu", "r_temp_pu", "tr_s", "tf_s", "velm_pu_s", "at_pu")
         check_nonnegative(self, "tg_s", "tw_s", "dturb_pu", "q_nl_pu")
-        if _concrete(self.g_max_pu, self.g_min_pu):
-            _check(self, self.g_max_pu >= self.g_min_pu,
+        if all_concrete(self.g_max_pu, self.g_min_pu):
+            check_that(self, self.g_max_pu >= self.g_min_pu,
                    f"GMAX ({self.g_max_pu}) must be >= GMIN ({self.g_min_pu})")
 
     def _hydraulics(self, state):
@@ -540,11 +532,11 @@ class GGOV1(AbstractGovernor):
         check_nonnegative(self, "t_pelec_s", "kpgov", "kigov", "kdgov", "t_dgov_s", "t_b_s", "t_c_s",
                           "t_eng_s", "t_fload_s", "kpload", "kiload", "kimw", "aset_pu_s", "ka",
                           "t_a_s", "t_sa_s", "t_sb_s")
-        if _concrete(self.r_close_pu_s, self.v_max_pu, self.v_min_pu, self.maxerr_pu, self.minerr_pu):
-            _check(self, self.r_close_pu_s < 0, f"Rclose must be < 0, got {self.r_close_pu_s}")
-            _check(self, self.v_max_pu >= self.v_min_pu,
+        if all_concrete(self.r_close_pu_s, self.v_max_pu, self.v_min_pu, self.maxerr_pu, self.minerr_pu):
+            check_that(self, self.r_close_pu_s < 0, f"Rclose must be < 0, got {self.r_close_pu_s}")
+            check_that(self, self.v_max_pu >= self.v_min_pu,
                    f"Vmax ({self.v_max_pu}) must be >= Vmin ({self.v_min_pu})")
-            _check(self, self.maxerr_pu >= self.minerr_pu,
+            check_that(self, self.maxerr_pu >= self.minerr_pu,
                    f"maxerr ({self.maxerr_pu}) must be >= minerr ({self.minerr_pu})")
 
     # -- algebraic pieces --
@@ -697,7 +689,7 @@ class WeightedGovernor(AbstractGovernor):
                              f"{np.shape(self.weights)[-1]} weights")
         check_nonnegative(self, "weights")
         if concrete(self.weights):
-            _check(self, np.sum(np.asarray(self.weights), axis=-1) <= 1.0 + 1e-9,
+            check_that(self, np.sum(np.asarray(self.weights), axis=-1) <= 1.0 + 1e-9,
                    f"weights must sum to <= 1, got {np.asarray(self.weights)}")
 
     def _sizes(self):

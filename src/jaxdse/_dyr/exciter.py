@@ -38,22 +38,11 @@ from typing import Literal
 
 import equinox as eqx
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
 from .._core.blocks import blocked, lag, lead_lag, nonwindup_lag, safe, washout
-from .._core.fields import as_float, check_nonnegative, check_positive, concrete
+from .._core.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
 from .base import AbstractExciter, ExciterInputs
-
-
-def _check(module, ok, message: str) -> None:
-    """ValueError for a concrete parameter combination that is invalid (tracers pass)."""
-    if concrete(ok) and not bool(np.all(np.asarray(ok))):
-        raise ValueError(f"{type(module).__name__}: {message}")
-
-
-def _concrete(*values) -> bool:
-    return all(concrete(v) for v in values)
 
 
 def _nonzero(x):
@@ -133,8 +122,8 @@ class SEXS(AbstractExciter):
     def __check_init__(self):
         check_positive(self, "k", "t_e_s")
         check_nonnegative(self, "ta_tb", "t_b_s")
-        if _concrete(self.e_max_pu, self.e_min_pu):
-            _check(self, self.e_max_pu >= self.e_min_pu,
+        if all_concrete(self.e_max_pu, self.e_min_pu):
+            check_that(self, self.e_max_pu >= self.e_min_pu,
                    f"EMAX ({self.e_max_pu}) must be >= EMIN ({self.e_min_pu})")
 
     @property
@@ -219,8 +208,8 @@ class _DCExciter(AbstractExciter):
         check_positive(self, "ka", "t_e_s")
         check_nonnegative(self, "t_r_s", "t_a_s", "t_b_s", "t_c_s", "kf", "t_f_s",
                           "e1_pu", "se1", "e2_pu", "se2")
-        if _concrete(self.vr_max_pu, self.vr_min_pu):
-            _check(self, self.vr_max_pu >= self.vr_min_pu,
+        if all_concrete(self.vr_max_pu, self.vr_min_pu):
+            check_that(self, self.vr_max_pu >= self.vr_min_pu,
                    f"VRMAX ({self.vr_max_pu}) must be >= VRMIN ({self.vr_min_pu})")
 
     @property
@@ -367,10 +356,10 @@ class EXST1(AbstractExciter):
     def __check_init__(self):
         check_positive(self, "ka", "t_a_s")
         check_nonnegative(self, "t_r_s", "t_c_s", "t_b_s", "kc", "kf", "t_f_s")
-        if _concrete(self.vi_max_pu, self.vi_min_pu, self.vr_max_pu, self.vr_min_pu):
-            _check(self, self.vi_max_pu >= self.vi_min_pu,
+        if all_concrete(self.vi_max_pu, self.vi_min_pu, self.vr_max_pu, self.vr_min_pu):
+            check_that(self, self.vi_max_pu >= self.vi_min_pu,
                    f"VIMAX ({self.vi_max_pu}) must be >= VIMIN ({self.vi_min_pu})")
-            _check(self, self.vr_max_pu >= self.vr_min_pu,
+            check_that(self, self.vr_max_pu >= self.vr_min_pu,
                    f"VRMAX ({self.vr_max_pu}) must be >= VRMIN ({self.vr_min_pu})")
 
     @property
@@ -468,15 +457,15 @@ class ESST3A(AbstractExciter):
         check_positive(self, "km", "ka", "vb_max_pu")
         check_nonnegative(self, "t_r_s", "t_c_s", "t_b_s", "t_a_s", "kg", "kp", "ki", "kc",
                           "xl_pu", "t_m_s")
-        if _concrete(self.vi_max_pu, self.vi_min_pu, self.vr_max_pu, self.vr_min_pu,
+        if all_concrete(self.vi_max_pu, self.vi_min_pu, self.vr_max_pu, self.vr_min_pu,
                      self.vm_max_pu, self.vm_min_pu, self.t_a_s, self.t_m_s):
-            _check(self, self.vi_max_pu >= self.vi_min_pu,
+            check_that(self, self.vi_max_pu >= self.vi_min_pu,
                    f"VIMAX ({self.vi_max_pu}) must be >= VIMIN ({self.vi_min_pu})")
-            _check(self, self.vr_max_pu >= self.vr_min_pu,
+            check_that(self, self.vr_max_pu >= self.vr_min_pu,
                    f"VRMAX ({self.vr_max_pu}) must be >= VRMIN ({self.vr_min_pu})")
-            _check(self, self.vm_max_pu >= self.vm_min_pu,
+            check_that(self, self.vm_max_pu >= self.vm_min_pu,
                    f"VMMAX ({self.vm_max_pu}) must be >= VMMIN ({self.vm_min_pu})")
-            _check(self, (self.t_a_s > 0) | (self.t_m_s > 0),
+            check_that(self, (self.t_a_s > 0) | (self.t_m_s > 0),
                    "TA and TM may not both be 0 (EFD would depend on Vref directly)")
 
     @property

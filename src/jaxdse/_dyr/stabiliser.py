@@ -43,7 +43,7 @@ from jaxtyping import Array, Float
 from .._core.blocks import lag as _lag
 from .._core.blocks import lead_lag as _lead_lag
 from .._core.blocks import safe as _safe
-from .._core.fields import as_float, check_nonnegative, concrete
+from .._core.fields import all_concrete, as_float, check_nonnegative, check_that
 from .base import AbstractStabiliser, StabiliserInputs
 
 INPUT_MODES = {
@@ -58,14 +58,6 @@ INPUT_MODES = {
 with the same position (MODE 1 = ``speed_dev_pu`` ... MODE 6 = ``dvt_dt_pu_s``)."""
 
 
-def _check(module, ok, message: str) -> None:
-    """ValueError for a concrete parameter combination that is invalid (tracers pass)."""
-    if concrete(ok) and not bool(np.all(np.asarray(ok))):
-        raise ValueError(f"{type(module).__name__}: {message}")
-
-
-def _concrete(*values) -> bool:
-    return all(concrete(v) for v in values)
 
 
 def _check_mode(module, name: str, mode: int, allow_zero: bool = False) -> None:
@@ -106,12 +98,12 @@ def _washout(u, x, gain, t_num, t_den):
 
 
 def _check_common(module) -> None:
-    if _concrete(module.ls_max_pu, module.ls_min_pu):
-        _check(module, module.ls_max_pu >= module.ls_min_pu,
+    if all_concrete(module.ls_max_pu, module.ls_min_pu):
+        check_that(module, module.ls_max_pu >= module.ls_min_pu,
                f"LSMAX ({module.ls_max_pu}) must be >= LSMIN ({module.ls_min_pu})")
-    if _concrete(module.vcu_pu, module.vcl_pu):
+    if all_concrete(module.vcu_pu, module.vcl_pu):
         both = (module.vcu_pu != 0) & (module.vcl_pu != 0)
-        _check(module, ~both | (module.vcu_pu > module.vcl_pu),
+        check_that(module, ~both | (module.vcu_pu > module.vcl_pu),
                f"VCU ({module.vcu_pu}) must be > VCL ({module.vcl_pu}) when both are used")
 
 
@@ -185,13 +177,13 @@ class IEEEST(AbstractStabiliser):
         _check_bus(self, "remote_bus", self.remote_bus)
         check_nonnegative(self, "a1_s", "a2_s2", "a3_s", "a4_s2", "t1_s", "t2_s", "t3_s",
                           "t4_s", "t5_s")
-        if _concrete(self.t5_s, self.t6_s):
-            _check(self, (self.t5_s == 0) | (self.t6_s > 0),
+        if all_concrete(self.t5_s, self.t6_s):
+            check_that(self, (self.t5_s == 0) | (self.t6_s > 0),
                    f"T6 must be > 0 (washout s T5/(1 + s T6)), got {self.t6_s}")
-        if _concrete(self.a1_s, self.a2_s2, self.a3_s, self.a4_s2, self.a5_s, self.a6_s2):
+        if all_concrete(self.a1_s, self.a2_s2, self.a3_s, self.a4_s2, self.a5_s, self.a6_s2):
             n = int(self._filter_order())
             num = 2 if self.a6_s2 != 0 else (1 if self.a5_s != 0 else 0)
-            _check(self, num <= n,
+            check_that(self, num <= n,
                    f"filter (1 + A5 s + A6 s^2)/D(s) is improper: numerator order {num} > "
                    f"denominator order {n} (A1..A4 = {float(self.a1_s)}, {float(self.a2_s2)}, "
                    f"{float(self.a3_s)}, {float(self.a4_s2)})")
@@ -324,9 +316,9 @@ class ST2CUT(AbstractStabiliser):
         _check_bus(self, "remote_bus", self.remote_bus)
         _check_bus(self, "remote_bus2", self.remote_bus2)
         check_nonnegative(self, "t1_s", "t2_s", "t5_s", "t6_s", "t7_s", "t8_s", "t9_s", "t10_s")
-        if _concrete(self.t3_s, self.t4_s):
-            _check(self, self.t3_s > 0, f"T3 must be > 0 (washout s T3/(1 + s T4)), got {self.t3_s}")
-            _check(self, self.t4_s > 0, f"T4 must be > 0 (washout s T3/(1 + s T4)), got {self.t4_s}")
+        if all_concrete(self.t3_s, self.t4_s):
+            check_that(self, self.t3_s > 0, f"T3 must be > 0 (washout s T3/(1 + s T4)), got {self.t3_s}")
+            check_that(self, self.t4_s > 0, f"T4 must be > 0 (washout s T3/(1 + s T4)), got {self.t4_s}")
         _check_common(self)
 
     @property

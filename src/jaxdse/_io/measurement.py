@@ -13,10 +13,11 @@ Applied at the edge, in NumPy, in this order:
 4. plausibility of units and set-up, from medians and statistics of the whole recording:
    no stuck (constant) magnitude or frequency channel, voltage near 1 pu (which also tells
    phase-to-ground from phase-to-phase), current below 3x rating and not a power-carrying
-   trickle (a unit or CT-ratio mistake), no reversed power, frequency near nominal, angle
-   steps that fit the declared angle unit, the voltage-angle drift against f_nominal, the
-   frame rate against f_nominal (without a frequency channel), and the PMU voltage base
-   against the machine's rated voltage for the declared location;
+   trickle (a unit or CT-ratio mistake), current within the machine's short-time capability
+   (IEEE C50.13) and reactive power within its capability curve, no reversed power,
+   frequency near nominal, angle steps that fit the declared angle unit, the voltage-angle
+   drift against f_nominal, the frame rate against f_nominal (without a frequency channel),
+   and the PMU voltage base against the machine's rated voltage for the declared location;
 5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, and
    spikes (a Hampel filter: deviation from a running median beyond ``SPIKE_SIGMAS`` robust
    standard deviations, in runs of at most ``SPIKE_MAX_SAMPLES``) become missing; a spike in
@@ -74,6 +75,23 @@ MIN_CURRENT_PU_MACHINE = 0.01
 secondary amperes); an offline machine's current carries none."""
 MIN_POWER_FACTOR = 0.5
 """Median P / |S| above which a small current is a real, scaled load current [-]."""
+MAX_LOADING = 1.1
+"""Median apparent power [pu of the machine rating] above which the operating point is not
+plausible: a unit runs at its rating at most, plus what a cold day or a high voltage allows;
+and the current [pu of the rating] above which short-time overload heating accumulates [-]."""
+OVERLOAD_MIN_S = 1.0
+"""Only currents above ``MAX_LOADING`` for this long around a sample heat the stator in the
+short-time check: a spike or a fault clearing within a second is left to the screening [s]."""
+SHORT_TIME_CAPABILITY_S = 41.4
+"""IEEE C50.13 short-time armature current capability of round-rotor machines: (I^2 - 1) t
+[pu^2 s] (10 s at 2.26, 30 s at 1.54, 60 s at 1.30, 120 s at 1.16 x rated current)."""
+MAX_Q_LAGGING = 0.9
+"""Median lagging reactive power [pu of the machine rating] above which the field would
+overheat: the field-heating limit at P = 0 is 0.75-0.86 pu for x_d = 1-2.5 pu and a rated
+power factor of 0.85 [-]."""
+LEADING_Q_MARGIN = 1.25
+"""Median leading reactive power below this x -V^2/x_d (the round-rotor steady-state stability
+limit at P = 0) is outside the capability curve [-]."""
 MIN_POWER_PU_MACHINE = -0.05
 """Median active power [pu of the machine rating] below this: the current is reversed."""
 MAX_FREQUENCY_OFFSET = 0.1
@@ -245,7 +263,7 @@ def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = Non
                         if r not in ("stat", "valid") and np.any(~np.isfinite(raw[r][order]))}
     if not np.any(np.isfinite(v) & np.isfinite(i)):
         raise InputError(src, "no row has all phasor channels", row=f"{rownum[0]}-{rownum[-1]}")
-    _plausibility(v, i, f, t, raw, order, spec, machine, src, names, q)
+    _plausibility(v, i, f, t, rows, raw, order, spec, machine, src, names, q)
     v, i, f = _screen(v, i, f, t, raw, order, rows, spec, machine, names, q)
     segments = _segments(t, v, i, f, rows, raw, order, spec, src, names, q)
     q["units"] = {"voltage": spec.voltage_unit, "current": spec.current_unit,
@@ -442,7 +460,7 @@ def _machine_scale(spec: MeasurementSpec, machine: Machine | None) -> float | No
 
 # --- plausibility (whole recording) ------------------------------------------------------------
 
-def _plausibility(v, i, f, t, raw, order, spec: MeasurementSpec, machine, src, names, q):
+def _plausibility(v, i, f, t, rows, raw, order, spec: MeasurementSpec, machine, src, names, q):
     fin = np.isfinite(v) & np.isfinite(i)
     vm = float(np.median(np.abs(v[fin])))
     vname = names.get("v_mag", names.get("v_a_mag"))
@@ -466,10 +484,10 @@ def _plausibility(v, i, f, t, raw, order, spec: MeasurementSpec, machine, src, n
         if im > MAX_CURRENT_PU_MACHINE:
             raise InputError(src, f"median current is {im:.4g} pu of the machine rating: check "
                              f"measurement.current_unit ({spec.current_unit!r}) and the bases", column=iname)
-        s = v[fin] * np.conj(i[fin])
-        p = float(np.median(s.real)) * scale
+        s = v * np.conj(i)
+        p = float(np.median(s[fin].real)) * scale
         q["median_p_pu_machine"] = round(p, 6)
-        s_mag = float(np.median(np.abs(s))) * scale
+        s_mag = float(np.median(np.abs(s[fin]))) * scale
         if 0 < im < MIN_CURRENT_PU_MACHINE and p > MIN_POWER_FACTOR * s_mag:
             raise InputError(src, f"median current is {im:.3g} pu of the machine rating yet carries "
                              f"power at power factor {p / s_mag:.2f}: a scale mistake; check "
@@ -479,6 +497,7 @@ def _plausibility(v, i, f, t, raw, order, spec: MeasurementSpec, machine, src, n
             raise InputError(src, f"median active power is {p:.3g} pu (the plant absorbs power): if "
                              "the current is measured towards the plant set "
                              "measurement.current_direction = \"into_plant\"", column=iname)
+        _check_rating(np.abs(i) * scale, s * scale, vm, t, fin, rows, spec, machine, src, iname)
         _check_voltage_base(spec, machine, src, vname)
     f0 = spec.f_nominal_hz
     if f is not None and np.any(np.isfinite(f)):
@@ -490,6 +509,63 @@ def _plausibility(v, i, f, t, raw, order, spec: MeasurementSpec, machine, src, n
     else:
         _check_system_rate(1.0 / np.median(np.diff(t)), spec, src, names["time"])
     _check_angles(v, t, f, raw, order, spec, src, aname, q)
+
+
+def _check_rating(i_pu, s_pu, v_pu, t, fin, rows, spec: MeasurementSpec, machine: Machine, src, iname):
+    """The current and the reactive power against what the machine can carry (issue-19 item 4).
+
+    * The operating point: median apparent power above ``MAX_LOADING`` x the rating.
+    * Armature current [pu of the rating] beyond IEEE C50.13's short-time capability: runs above
+      ``MAX_LOADING`` accumulate (I^2 - 1) dt; more than ``SHORT_TIME_CAPABILITY_S`` is
+      a current no stator carries (1.16 x rating for 120 s, 1.30 x for 60 s, 2.26 x for 10 s).
+      A fault or a swing of a few seconds passes.
+    * Median reactive power beyond the capability curve: lagging above ``MAX_Q_LAGGING`` of
+      the rating (the field-heating limit at zero active power, for any rated power factor of
+      0.85 or more), or leading below ``LEADING_Q_MARGIN`` x the steady-state stability limit
+      -V^2/x_d.
+
+    Either means a wrong current or voltage scale or angle reference (a CT ratio, peak instead of
+    RMS, a base, a phase mapping), or a wrong rating: refused, with the numbers.
+    """
+    rating = float(machine.s_rated_mva)
+    fix = (f"check measurement.current_unit ({spec.current_unit!r}), a CT ratio (peak instead of "
+           f"RMS?), the bases and machine.s_rated_mva ({rating:g} MVA)")
+    load = float(np.median(np.abs(s_pu[fin])))
+    if load > MAX_LOADING:
+        raise InputError(src, f"median apparent power is {load:.3g} pu of the rating ({load * rating:.4g} "
+                         f"of {rating:g} MVA), above {MAX_LOADING:g} x: no machine runs so far above its "
+                         "rating as an operating point; " + fix + " (or does the measured current "
+                         "include units outside this rating?)", column=iname)
+    over = fin & (i_pu > MAX_LOADING)
+    half = max(int(round(OVERLOAD_MIN_S / 2 / np.median(np.diff(t)))), 1)
+    count = np.concatenate([[0], np.cumsum(over)])
+    lo, hi = np.clip(np.arange(t.size) - half, 0, t.size), np.clip(np.arange(t.size) + half + 1, 0, t.size)
+    over &= (count[hi] - count[lo]) == hi - lo  # above for OVERLOAD_MIN_S around: no spike, no fault
+    if np.any(over):  # (I^2 - 1) t accumulated over each run above the margin
+        inc = np.where(over, (np.where(fin, i_pu, 0.0) ** 2 - 1.0) * np.diff(t, prepend=t[0]), 0.0)
+        heat = np.cumsum(inc)
+        first = np.maximum.accumulate(np.where(over & ~np.roll(over, 1), np.arange(t.size), 0))
+        excess = np.where(over, heat - heat[first] + inc[first], 0.0)
+        b = int(np.argmax(excess))
+        a = int(first[b])
+        if excess[b] > SHORT_TIME_CAPABILITY_S:
+            raise InputError(src, f"the current stays above the machine's short-time capability: "
+                             f"{float(np.mean(i_pu[a:b + 1])):.3g} pu of the rating on average (peak "
+                             f"{float(np.max(i_pu[a:b + 1])):.3g}) for {t[b] - t[a]:.3g} s; IEEE C50.13 "
+                             f"allows (I^2 - 1) t = {SHORT_TIME_CAPABILITY_S:g} s, this run has "
+                             f"{excess[b]:.3g} s; " + fix, column=iname, row=f"{rows[a]}-{rows[b]}")
+    q_pu = float(np.median(s_pu[fin].imag))
+    q_min = -LEADING_Q_MARGIN * v_pu**2 / float(machine.xd_pu)
+    if q_pu > MAX_Q_LAGGING or q_pu < q_min:
+        side = (f"above {MAX_Q_LAGGING:g} pu, the field-heating limit" if q_pu > 0 else
+                f"below {q_min:.3g} pu, {LEADING_Q_MARGIN:g} x the steady-state stability limit "
+                f"-V^2/x_d (x_d = {float(machine.xd_pu):g} pu)")
+        p_pu = float(np.median(s_pu[fin].real))
+        raise InputError(src, f"median reactive power is {q_pu:.3g} pu of the rating ({side}) at "
+                         f"P = {p_pu:.3g} pu, power factor {p_pu / np.hypot(p_pu, q_pu):.2f}: outside "
+                         "the machine's capability; check the current angle reference (phase "
+                         "mapping, a transformer's 30 degree shift) and " + fix.removeprefix("check "),
+                         column=iname)
 
 
 def _check_voltage_base(spec: MeasurementSpec, machine: Machine, src, vname):
