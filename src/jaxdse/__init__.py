@@ -14,6 +14,9 @@ from ._app.fleet import fleet as fleet
 from ._app.run import run_config as run_config
 from ._app.validate import parameter_specs as parameter_specs
 from ._app.validate import validate as validate
+from ._app.windows import WindowCriteria as WindowCriteria
+from ._app.windows import dominant_mode as dominant_mode
+from ._app.windows import window_scores as window_scores
 from ._core.assess import Assessment as Assessment
 from ._core.assess import assess as assess
 from ._core.drem import ObserverConfig as ObserverConfig

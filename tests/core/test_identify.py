@@ -82,7 +82,7 @@ CASES = {
     "h_rests_on_damping": ({"identified__h_without_damping_s": 100.0, "identified__a1": 0.0}, 1),
     "h_rests_on_governor": ({"identified__h_without_governor_correction_s": 100.0,
                              "identified__governor_gain_error": 0.0}, 1),
-    "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 0),
+    "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 1),
     "d_interval_wide": ({"identified__d_ci95": [-10.0, 10.0]}, 0),
     "governor_model_off": ({"identified__governor_gain_error": -0.6}, 0),
     "drem_not_converged": ({"estimate__converged": False}, 0),
@@ -118,10 +118,3 @@ def test_playback_diverged_and_drem_bits(assessed):
                  identified__governor_gain_error=0.4, identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))
     v = verdict(sure.estimate, sure.identified, sure.replay)
     assert not int(v.reasons) & _BIT["h_rests_on_governor"] and int(v.code) == 0
-    # ... except D = 0 where the fit asks for D < 0 with confidence: an H that moves when the
-    # lumped negative D is dropped rests on it
-    lumped = _with(assessed, identified__d_ci95=[-3.0, -1.5], identified__d_pu_s=-2.0,
-                   identified__h_without_damping_s=100.0,
-                   identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))
-    v = verdict(lumped.estimate, lumped.identified, lumped.replay)
-    assert int(v.reasons) & _BIT["h_rests_on_damping"] and int(v.code) == 1 and int(v.d_code) == 1
