@@ -60,11 +60,12 @@ def main():
              "| D true | D scale | measured mode [Hz] | damping | replay mode [Hz] | damping | sMAPE P [%] | "
              "window verdict |", "|---|---|---|---|---|---|---|---|"]
     for r in rows:
-        lines.append(f"| {r['D_true']} | {r['D_scale']} | {f(r['mode_measured_hz'])} | {f(r['damping_measured'])} | "
-                     f"{f(r['mode_replay_hz'])} | {f(r['damping_replay'])} | {f(r['smape_p_percent'])} | "
-                     f"{'pass' if r['passes'] else 'fail: ' + '; '.join(r['reasons'])} |")
-    lines += ["", "Where the recording swings (small D), the imposed terminal angle carries the swing and the "
-              "replay's dominant mode stays the measured one whatever D. Where D damps the machine's own "
+        verdict = "pass" if r["passes"] else "fail: " + "; ".join(r["reasons"])
+        lines.append(f"| {r['D_true']} | {r['D_scale']} | {f(r['mode_measured_hz'])} | "
+                     f"{f(r['damping_measured'])} | {f(r['mode_replay_hz'])} | {f(r['damping_replay'])} | "
+                     f"{f(r['smape_p_percent'])} | {verdict} |")
+    lines += ["", "Where the recording swings (small D), the imposed terminal angle carries the swing and "
+              "the replay's dominant mode stays the measured one whatever D. Where D damps the machine's own "
               "swing (large D), the replay with D scaled down rings where the recording does not, and fails "
               "its event window with a small whole-window sMAPE: `tests/app/test_window_replay.py` plants "
               "that failure."]
