@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.identify import _huber, _regression
+from jaxdse._core.identify import _huber, _regression, refit_spread
 from jaxdse._core.lti import hold_discretisation, lag_chain
 from jaxdse._core.verdict import _BIT, REASONS, VerdictSettings, verdict
 
@@ -48,6 +48,17 @@ def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):
         noise_interval="sandwich")))(clean)
     assert abs(float(ident.a2) / float(ambient.truth.a2) - 1) < 0.01
     assert bool(ident.ok) and float(ident.h_ci95[0]) <= float(ident.h_s) <= float(ident.h_ci95[1])
+    assert int(ident.filter_spread_fits) == 2  # the model is right: every filter fits
+
+
+def test_refits_that_explain_nothing_leave_the_spread():
+    """The spread counts the refits that explain at least half of what the main fit explains."""
+    spread, fits = refit_spread(10.0, jnp.array([9.0, 2.0]), 0.9, jnp.array([0.8, 0.3]))
+    assert int(fits) == 1 and float(spread) == pytest.approx(0.1)  # the 2.0 (5x off) is no fit
+    spread, fits = refit_spread(10.0, jnp.array([9.0, 12.0]), 0.9, jnp.array([0.45, 0.5]))
+    assert int(fits) == 2 and float(spread) == pytest.approx(0.2)
+    spread, fits = refit_spread(10.0, jnp.array([2.0, 50.0]), 0.9, jnp.array([-0.5, 0.1]))
+    assert int(fits) == 0 and float(spread) == 0.0
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +93,7 @@ CASES = {
     "h_rests_on_damping": ({"identified__h_without_damping_s": 100.0, "identified__a1": 0.0}, 1),
     "h_rests_on_governor": ({"identified__h_without_governor_correction_s": 100.0,
                              "identified__governor_gain_error": 0.0}, 1),
-    "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 1),
+    "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 0),
     "d_interval_wide": ({"identified__d_ci95": [-10.0, 10.0]}, 0),
     "governor_model_off": ({"identified__governor_gain_error": -0.6}, 0),
     "drem_not_converged": ({"estimate__converged": False}, 0),

@@ -24,7 +24,8 @@ governor's response). The regression is linear, so the solution is closed form:
 * the interval has three parts, added in quadrature: the noise part (``noise_interval``);
   the
   filter spread (refits with F made slower and faster: a right model finds the same a2
-  with any filter); and ``model_error``, the 3rd-order model's error against real machines.
+  with any filter; a standard deviation, so 1.96 times it, from the refits that fit the swing
+  equation at all); and ``model_error``, the 3rd-order model's error against real machines.
 
 The noise part propagates white noise of the levels measured on the recording itself (second
 differences of |V|, |I|, the angles and f) through the whole front end and the weighted fit:
@@ -152,15 +153,19 @@ class Identified(eqx.Module):
     """g / a2: the relative error of the governor model's response [-]."""
     relative_ci: Float[Array, ""]
     """Half width of the 95 % interval of a2 over a2 (the relative uncertainty of H) [-]:
-    ``relative_ci_noise``, ``filter_spread`` and ``IdentifySettings.model_error`` added in
-    quadrature."""
+    ``relative_ci_noise``, ``Z95 * filter_spread`` and ``IdentifySettings.model_error`` added
+    in quadrature."""
     relative_ci_noise: Float[Array, ""]
     """The part from the measurement noise: 1.96 se_a2 / a2 [-]."""
     filter_spread: Float[Array, ""]
     """Largest relative change of a2 when the filter F is made slower or faster
     (``IdentifySettings.spread_scales``) [-]. Were the model right, every filter would find
     the same a2 up to noise; a spread is model error (a 6th-order machine, a governor model
-    that is off), which the residual's variance does not show."""
+    that is off), which the residual's variance does not show. It enters the interval as a
+    standard deviation (``Z95 * filter_spread``). Only refits that explain at least half of
+    what the main fit explains count (``filter_spread_fits``)."""
+    filter_spread_fits: Array
+    """How many of the refits of ``spread_scales`` count in ``filter_spread`` [-]."""
     information: Float[Array, "4 4"]
     """Information matrix of (a1, a2, c, g), scaled to unit diagonal [-]; its condition number
     (:func:`condition_number`, on the host) tells whether a2 is separable from the others."""
@@ -226,6 +231,11 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
         design, z = _regression(sig, disc)
         return design, z, _huber(design, z, valid, s.robust_iterations, s.huber_k)
 
+    def explained(z, resid):  # the share of the filtered acceleration's variance the fit explains
+        v = valid.astype(z.dtype)
+        centred = z - jnp.sum(v * z) / jnp.maximum(jnp.sum(v), 1.0)
+        return 1.0 - jnp.sum(v * resid**2) / jnp.maximum(jnp.sum(v * centred**2), 1e-300)
+
     design, z, (theta, weights, slope, resid) = fit(filters[1.0], signals)
     # What H rests on: the same weighted fit with D fixed at 0, and with the governor correction
     # fixed at 0 (a column dropped: its row and column of the normal matrix become the identity).
@@ -233,11 +243,15 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     a2_without = jnp.stack([_fit_without(normal, rhs, j)[1] for j in (0, 3)])
     cov, info = _sandwich(design * (weights * resid)[:, None], (design * slope[:, None]).T @ design, window)
     if s.spread_scales:  # each filter's own Huber fit (its own weights: the same weights shift a2)
-        others = jax.vmap(lambda d: fit(d, signals)[2][0][1])(
+        def refit(d):
+            _, zk, (theta_k, _, _, resid_k) = fit(d, signals)
+            return theta_k[1], explained(zk, resid_k)
+
+        others, share = jax.vmap(refit)(
             jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(filters[k] for k in s.spread_scales)))
-        spread = jnp.max(jnp.abs(others / theta[1] - 1.0))
+        spread, spread_fits = refit_spread(theta[1], others, explained(z, resid), share)
     else:
-        spread = jnp.zeros((), ts.dtype)
+        spread, spread_fits = jnp.zeros((), ts.dtype), jnp.zeros((), jnp.int32)
     levels = noise_levels(recording, fe.valid)
     if s.noise_interval == "bootstrap":
         def draw(key):  # the weighted fit (the fit's Huber weights) on the recording with more noise
@@ -251,12 +265,26 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
 
         keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
         cov = jnp.cov(jax.vmap(draw)(keys), rowvar=False)
-    ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, levels, jnp.array(False),
-                 s.model_error, t_ref, t_m0, a2_without)
+    ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, spread_fits, levels,
+                 jnp.array(False), s.model_error, t_ref, t_m0, a2_without)
     if not s.output_error:
         return ee
-    oe = _output_error(ts, fe, t_ref, plant, settings, s, ee, valid, window, dt, spread, levels)
+    oe = _output_error(ts, fe, t_ref, plant, settings, s, ee, valid, window, dt, levels)
     return jax.tree_util.tree_map(lambda a, b: jnp.where(oe.output_error, a, b), oe, ee)
+
+
+def refit_spread(a2, a2_refits, explained, explained_refits):
+    """The filter spread [-] (the largest relative change of a2 over the refits) and how many
+    refits count in it.
+
+    A refit that explains less than half of what the main fit explains (``explained``: the
+    share of the filtered acceleration's variance) is no fit of the swing equation, and does
+    not count: a filter band without the event (on OSL case 1 the slower filter's H is 5x off
+    while it leaves as much residual as there is signal).
+    """
+    counts = explained_refits >= 0.5 * explained
+    spread = jnp.max(jnp.where(counts, jnp.abs(a2_refits / a2 - 1.0), 0.0), initial=0.0)
+    return spread, jnp.sum(counts).astype(jnp.int32)
 
 
 def _fit_without(normal, rhs, j: int):
@@ -297,7 +325,7 @@ def _regression(signals, discretisation):
 
 
 def _output_error(ts, fe: FrontEnd, t_ref, plant: Plant, settings: Settings, s: IdentifySettings,
-                  start: Identified, valid, window, dt, spread, levels) -> Identified:
+                  start: Identified, valid, window, dt, levels) -> Identified:
     """Levenberg-Marquardt on the playback residual over p = (a1, ln(a2/a2_0), offset, gain)."""
     w_s = plant.machine.omega_s
     integ = settings.playback_integrator
@@ -338,7 +366,8 @@ def _output_error(ts, fe: FrontEnd, t_ref, plant: Plant, settings: Settings, s: 
     # The alternatives stay the equation error's (H = ws / 2 a2 is its own inverse map).
     h_without = jnp.stack([start.h_without_damping_s, start.h_without_governor_correction_s])
     a2_without = inertia_from_a2(h_without, w_s)
-    return _result(theta, to_theta @ cov_p @ to_theta.T, info, w_s, jnp.sum(valid), spread, levels,
+    return _result(theta, to_theta @ cov_p @ to_theta.T, info, w_s, jnp.sum(valid), start.filter_spread,
+                   start.filter_spread_fits, levels,
                    converged, s.model_error, t_ref, start.t_m0_pu, a2_without)
 
 
@@ -510,11 +539,13 @@ def _sandwich(scores, info, window):
     return bread @ meat @ bread, info
 
 
-def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_error, t_ref,
-            t_m0, a2_without) -> Identified:
+def _result(theta, cov, info, w_s, samples, spread, spread_fits, levels, output_error, model_error,
+            t_ref, t_m0, a2_without) -> Identified:
     a1, a2, c, g = theta[0], theta[1], theta[2], theta[3]
     se = jnp.sqrt(jnp.maximum(jnp.diag(cov), 0.0))
-    half = jnp.sqrt((Z95 * se[1]) ** 2 + (spread**2 + model_error**2) * a2**2)
+    # The spread is one draw of how a2 depends on the filter (a standard deviation, not a bound):
+    # its 95 % part is Z95 times it.
+    half = jnp.sqrt((Z95 * se[1]) ** 2 + ((Z95 * spread) ** 2 + model_error**2) * a2**2)
     lo2, hi2 = a2 - half, a2 + half
     h_lo = inertia_from_a2(hi2, w_s)
     h_hi = jnp.where(lo2 > 0, inertia_from_a2(jnp.maximum(lo2, 1e-300), w_s), jnp.inf)
@@ -535,7 +566,7 @@ def _result(theta, cov, info, w_s, samples, spread, levels, output_error, model_
         h_ci95=jnp.stack([h_lo, h_hi]), d_ci95=jnp.stack([d - Z95 * se_d, d + Z95 * se_d]),
         se_a1=se[0], se_a2=se[1], covariance=cov, t_m_offset_pu=c / a2,
         governor_gain_error=g / a2, relative_ci=half / jnp.abs(a2),
-        relative_ci_noise=Z95 * se[1] / jnp.abs(a2), filter_spread=spread,
+        relative_ci_noise=Z95 * se[1] / jnp.abs(a2), filter_spread=spread, filter_spread_fits=spread_fits,
         information=scaled, t_ref_pu=t_ref, t_m0_pu=t_m0, h_variance_inflation=vif,
         h_without_damping_s=h_without[0], h_without_governor_correction_s=h_without[1],
         noise_levels=levels, samples=samples, ok=ok, output_error=output_error,

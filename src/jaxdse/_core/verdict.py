@@ -9,7 +9,9 @@ governor correction get their own verdicts, with the model-structure findings in
 3rd-order model lumps the excitation and stabiliser damping into D; a governor response far
 from the .dyr model's). The unit's headline is H's verdict, because H is what the fleet report
 files. A unit is never ``identified`` when H's interval is wider than ``identified_ci``
-(+-10 %), when H <= 0, when D < 0 with confidence, or when its playback diverges.
+(+-10 %), when H <= 0, when H rests on an assumption the data cannot rule out, or when its
+playback diverges. A negative D is D's finding (the 3rd-order model lumps the excitation and
+stabiliser damping into it), not H's.
 
 The verdicts are computed in JAX (integers and a bit set of reasons, so that they vmap over a
 fleet) and spelled out at the edge (:func:`describe`).
@@ -57,12 +59,12 @@ REASONS = {
 _BIT = {name: 1 << k for k, name in enumerate(REASONS)}
 _FAILED = ("offline", "solver", "not_finite", "h_not_positive", "playback_diverged")
 _NOT_IDENTIFIED = ("interval_very_wide",)
-_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor", "negative_damping")
-FINDINGS = ("d_interval_wide", "governor_model_off")
+_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor")
+FINDINGS = ("negative_damping", "d_interval_wide", "governor_model_off")
 """Reasons about D and the governor correction that set those parameters' verdicts, not H's.
-``negative_damping`` sets D's verdict and also keeps H from ``identified``: on the ANDES
-fleets (noise-free, .dyr plants) the one unit 14 % off with a +-8 % interval had D < 0 with
-confidence and nothing else against it."""
+A negative D reaches H's verdict through ``h_rests_on_damping`` and through the filter spread
+of H's interval: on the ANDES fleets the one unit 14 % off (ieee14 line trip, D < 0) has a
+filter spread of 7.5 %, so an interval of +-15 %."""
 NOTES = ("drem_contradicts", "drem_disagrees", "drem_not_converged") + FINDINGS
 """Reasons that do not set the headline (H's) verdict. The online DREM/I&I estimate uses a
 fraction of the recording's information (it adapts slowly, from its start); whether it
