@@ -59,7 +59,8 @@ def block() -> str:
             f"{s['machines']} machines, H, exciter gain and droop planted wrong, three events jointly: "
             f"H within 1 % for {s['H_within_1_percent_noise_free']}, every identifiable parameter within "
             f"10 % for {s['identifiable_within_10_percent']}; 95 % intervals cover the truth in "
-            f"{s['coverage_percent_all']:.1f} % of {s['noisy_draws']} noisy draws (H: "
+            f"{s['coverage_percent_all']:.1f} % of {s['noisy_draws']} noisy draws over {s['noisy_machines']} "
+            f"machines (H: "
             f"{s['coverage_percent_H']:.1f} %).")
     osl = load("experiments/naspi_osl_case1/dyr_playback.json")
     if osl:

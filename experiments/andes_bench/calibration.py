@@ -88,7 +88,14 @@ def planted(unit, specs, factors):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=10)
+    ap.add_argument("--report-only", action="store_true",
+                    help="rewrite the summary and calibration.md from the fits stored in calibration.json")
     args = ap.parse_args()
+    if args.report_only:
+        doc = json.loads((HERE / "calibration.json").read_text())
+        doc["summary"] = summarise(doc["rows"], doc["coverage"], doc["summary"]["wall_s_total"])
+        write(doc)
+        return
     fit = jd.PlaybackSettings(substeps=2)
     cal = jd.CalibrationSettings()
     opts = jd.CalibrateOptions()
@@ -147,27 +154,37 @@ def main():
                               "wall_s": round(time.perf_counter() - t0, 1)})
             print(f"  draw {draw}: H {rn.values[0]:.4f} [{rn.ci95[0][0]:.4f}, {rn.ci95[0][1]:.4f}]", flush=True)
         rows.append(row)
+    doc = {"settings": {"window_s": WINDOW_S, "tve_percent": TVE_PERCENT, "substeps": fit.substeps,
+                        "max_relative_ci": cal.max_relative_ci},
+           "summary": summarise(rows, cover, round(time.perf_counter() - t_all, 1)), "rows": rows,
+           "coverage": cover}
+    write(doc)
+
+
+def summarise(rows, cover, wall_s_total) -> dict:
+    """The summary of the noise-free fits (``rows``) and the noisy draws (``cover``)."""
     by_par = {}
     for c in cover:
         by_par.setdefault(c["parameter"], []).append(c["covered"])
-    summary = {
+    return {
         "machines": len(rows),
         "H_within_1_percent_noise_free": sum(r["H_within_1_percent"] for r in rows),
         "identifiable_within_10_percent": sum(r["identifiable_within_10_percent"] for r in rows),
         "unidentifiable_left_at_dyr": sum(r["unidentifiable_left_at_dyr"] for r in rows),
-        "noisy_draws": args.draws * len(rows),
+        "noisy_draws": len({(c["case"], c["unit"], c["draw"]) for c in cover}),
+        "noisy_machines": len({(c["case"], c["unit"]) for c in cover}),
         "coverage_percent_all": 100 * float(np.mean([c["covered"] for c in cover])) if cover else None,
         "coverage_percent_H": 100 * float(np.mean(by_par.get("H", [np.nan]))),
         "coverage_percent_by_parameter": {k: 100 * float(np.mean(v)) for k, v in by_par.items()},
         "median_wall_s_per_calibration": float(np.median([r["wall_s"] for r in rows])),
-        "wall_s_total": round(time.perf_counter() - t_all, 1),
+        "wall_s_total": wall_s_total,
     }
-    doc = {"settings": {"window_s": WINDOW_S, "tve_percent": TVE_PERCENT, "substeps": fit.substeps,
-                        "max_relative_ci": cal.max_relative_ci}, "summary": summary, "rows": rows,
-           "coverage": cover}
+
+
+def write(doc) -> None:
     (HERE / "calibration.json").write_text(json.dumps(doc, indent=1) + "\n")
     (HERE / "calibration.md").write_text(report(doc))
-    print(json.dumps(summary, indent=1))
+    print(json.dumps(doc["summary"], indent=1))
 
 
 def report(doc) -> str:
@@ -178,7 +195,8 @@ def report(doc) -> str:
            f"{s['H_within_1_percent_noise_free']}; "
            f"every identifiable parameter within 10 %: {s['identifiable_within_10_percent']}; "
            f"unidentifiable ones left at the .dyr value: {s['unidentifiable_left_at_dyr']}",
-           f"- noisy ({doc['settings']['tve_percent']} % TVE on V and I), {s['noisy_draws']} draws: 95 % "
+           f"- noisy ({doc['settings']['tve_percent']} % TVE on V and I), {s['noisy_draws']} draws over "
+           f"{s['noisy_machines']} machines: 95 % "
            f"intervals cover the truth in {s['coverage_percent_all']:.1f} % "
            f"(H: {s['coverage_percent_H']:.1f} %); "
            "by parameter: " + ", ".join(f"{k} {v:.0f} %" for k, v in s["coverage_percent_by_parameter"].items()),
