@@ -67,6 +67,12 @@ def test_fleet_json_and_report(ieee14):
         assert all(v is not None and v >= 0 for v in u["playback_rms_percent_mbase"].values())
         assert set(u["parameters"]) == {"H", "D", "governor_correction"}
         assert u["parameters"]["H"]["verdict"] == u["verdict"]
+    # No false green: B1_G1 comes out 14 % high with D < 0 (the 3rd-order model against GENROU
+    # through a line trip); its filter spread keeps it from `identified`.
+    worst = {u["name"]: u for u in doc["units"]}["B1_G1"]
+    assert worst["H_error_percent"] > 10 and worst["verdict"] != "identified", worst["reasons"]
+    assert "interval_wide" in worst["reasons"] and worst["interval"]["filter_refits_counted"] == 2
+    assert all(u["verdict"] != "identified" for u in doc["units"] if abs(u["H_error_percent"]) > 10)
     assert doc["case"]["dyr_models_not_used"] == ["ESST3A", "EXST1"]
     assert all(i["sha256"] for i in doc["inputs"])
     rows = (out / "fleet.csv").read_text().splitlines()
