@@ -40,6 +40,9 @@ if not os.environ.get("JAXDSE_TEST_OPTIMIZE"):
 if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
+# `jaxdse` commands run in-process or in subprocesses use the same cache, or none: never the
+# user's own (~/.cache/jaxdse).
+os.environ.setdefault("JAXDSE_CACHE_DIR", os.environ.get("JAX_COMPILATION_CACHE_DIR", "off"))
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

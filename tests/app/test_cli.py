@@ -1,3 +1,4 @@
+import os
 import shutil
 import subprocess
 import sys
@@ -97,3 +98,45 @@ def test_fleet_strict_exits_3_unless_every_unit_is_identified(tmp_path, capsys, 
     assert "--strict: 1 unit(s) not identified: B2_G1" in capsys.readouterr().err
     units[1]["verdict"] = "identified"
     assert main(argv + ["--strict"]) == 0
+
+
+def test_compilation_cache_folder(tmp_path):
+    """`jaxdse` keeps compiled code in $JAXDSE_CACHE_DIR, else $XDG_CACHE_HOME/jaxdse/xla;
+    JAXDSE_CACHE_DIR=off turns the cache off."""
+    script = ("import jax\nfrom jaxdse._app.cli import compilation_cache\n"
+              "print(compilation_cache())\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("JAXDSE_CACHE_DIR", "XDG_CACHE_HOME")}
+
+    def folder(**extra):
+        res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                             env=env | extra, check=True)
+        return res.stdout.strip().splitlines()[-1]
+
+    assert folder(JAXDSE_CACHE_DIR=str(tmp_path / "c")) == str(tmp_path / "c")
+    assert (tmp_path / "c").is_dir()
+    assert folder(XDG_CACHE_HOME=str(tmp_path / "x")) == str(tmp_path / "x" / "jaxdse" / "xla")
+    assert folder(JAXDSE_CACHE_DIR="off") == "None"
+
+
+def test_assessment_holds_no_host_callback(cut25, plant):
+    """A host callback (diffrax's runtime check of t0, t1 and dt0, were they traced) keeps an
+    executable out of JAX's persistent cache: the whole assessment must hold none."""
+    import jax
+
+    import jaxdse as jd
+
+    def prims(jaxpr):
+        for e in jaxpr.eqns:
+            yield e.primitive.name
+            for p in e.params.values():
+                for sub in p if isinstance(p, (list, tuple)) else [p]:
+                    inner = getattr(sub, "jaxpr", sub)
+                    if hasattr(inner, "eqns"):
+                        yield from prims(inner)
+                    elif hasattr(getattr(inner, "jaxpr", None), "eqns"):
+                        yield from prims(inner.jaxpr)
+
+    closed = jax.make_jaxpr(lambda r: jax.tree_util.tree_leaves(jd.assess(r, plant)))(cut25)
+    names = set(prims(closed.jaxpr))
+    assert "scan" in names and "while" in names  # the walk reaches the solver's loops
+    assert not {n for n in names if "callback" in n}, names

@@ -181,8 +181,14 @@ def solve_interval(vector_field, y0, t0, t1, u0, u1, args, integ: Integrator, ra
                                                        made_jump=False)
             ok = ok & (result == diffrax.RESULTS.successful)
         return y, ok, jnp.asarray(integ.substeps)
+    # In the interval's own time s = (t - t0) / h: diffeqsolve's t0, t1 and dt0 are then
+    # constants, so its runtime check of their signs (an error_if: a host callback) folds away
+    # when traced, and the compiled executable can be kept in JAX's persistent cache.
+    def g(s, y, a):
+        return jtu.tree_map(lambda d: h * d, vector_field(t0 + s * h, y, _lerp(u0, u1, s), args))
+
     sol = diffrax.diffeqsolve(
-        term, integ.solver, t0, t1, h, y0, stepsize_controller=integ.controller(h),
+        diffrax.ODETerm(g), integ.solver, 0.0, 1.0, 1.0, y0, stepsize_controller=integ.controller(1.0),
         saveat=diffrax.SaveAt(t1=True), max_steps=integ.max_substeps, throw=False,
         adjoint=diffrax.ForwardMode() if integ.forward_mode else diffrax.RecursiveCheckpointAdjoint(),
     )

@@ -16,6 +16,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from .._core.lti import zero_phase_lowpass
@@ -127,7 +128,8 @@ def _filtered(x, step, dt, cutoff_hz):
 
 
 def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s):
-    """t -> UnitInputs: |V| and its angle linear between frames, except across a voltage step,
+    """s -> UnitInputs, s the time in frames from the first (``(t - ts[0]) / dt``): |V| and its
+    angle linear between frames, except across a voltage step,
     where the frame after the step holds over the whole interval (a switching event happens
     just after the frame before it). Left-continuous at the frames, so that a fixed step
     that starts at a frame sees the step only from its second stage on (Tsit5's first-stage
@@ -139,9 +141,9 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
     if settings.input_filter_hz > 0:
         vm, th = (_filtered(x, step, dt, settings.input_filter_hz) for x in (vm, th))
 
-    def inputs(t):
-        k = jnp.clip(jnp.ceil((t - ts[0]) / dt - 1e-9).astype(int) - 1, 0, n - 2)
-        frac = jnp.where(step[k], 1.0, (t - ts[k]) / dt)
+    def inputs(s):  # s: time in frames from the first, (t - ts[0]) / dt
+        k = jnp.clip(jnp.ceil(s - 1e-9).astype(int) - 1, 0, n - 2)
+        frac = jnp.where(step[k], 1.0, s - k)
         dvm, dth = vm[k + 1] - vm[k], th[k + 1] - th[k]
         m, a = vm[k] + frac * dvm, th[k] + frac * dth
         rate = jnp.where(step[k], 0.0, 1.0 / dt)
@@ -171,30 +173,33 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
     y0, refs = unit.initial_state(u0, i_re0, i_im0)
     inputs = _input_function(series, settings, omega_s)
 
-    def rhs(t, y, args):
-        return unit.vector_field(y, inputs(t), refs)
-
     dt = (ts[1] - ts[0])
+
+    def rhs(s, y, args):  # in frames: dy/ds = dt dy/dt
+        return jax.tree_util.tree_map(lambda d: dt * d, unit.vector_field(y, inputs(s), refs))
+
     if settings.solver == "tsit5":
         solver = diffrax.Tsit5()
         controller = diffrax.ConstantStepSize()
-        dt0 = dt / settings.substeps
         max_steps = (ts.shape[0] + 1) * settings.substeps
     else:
         solver = diffrax.Kvaerno5()
         controller = diffrax.PIDController(rtol=settings.rtol, atol=settings.atol)
-        dt0 = dt / settings.substeps
         max_steps = 64 * ts.shape[0]
-    sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), solver, ts[0], ts[-1], dt0, y0,
-                              saveat=diffrax.SaveAt(ts=ts), stepsize_controller=controller,
-                              max_steps=max_steps, throw=False, adjoint=diffrax.ForwardMode())
+    # Time in frames: diffeqsolve's t0, t1 and dt0 are constants, so its runtime check of their
+    # signs (an error_if: a host callback) folds away and the executable can be cached.
+    frames = float(ts.shape[0] - 1)
+    sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), solver, 0.0, frames, 1.0 / settings.substeps, y0,
+                              saveat=diffrax.SaveAt(ts=np.arange(ts.shape[0], dtype=float)),
+                              stepsize_controller=controller, max_steps=max_steps, throw=False,
+                              adjoint=diffrax.ForwardMode())
     ys = sol.ys
 
-    def outputs(t, y):
-        out, efd, tm, _ = unit.signals(y, inputs(t), refs)
+    def outputs(s, y):
+        out, efd, tm, _ = unit.signals(y, inputs(s), refs)
         return out.p_pu, out.q_pu, efd, tm
 
-    p, q, efd, tm = jax.vmap(outputs)(ts, ys)
+    p, q, efd, tm = jax.vmap(outputs)(jnp.arange(ts.shape[0], dtype=ts.dtype), ys)
     m = unit.machine.n_states
     ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(ys))
     return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=ys[:, m - 1], delta_rad=ys[:, m - 2],
