@@ -152,7 +152,8 @@ def main():
                               "value": float(v), "ci95": [float(ci[0]), float(ci[1])],
                               "covered": bool(ci[0] <= x_true <= ci[1]),
                               "wall_s": round(time.perf_counter() - t0, 1)})
-            print(f"  draw {draw}: H {rn.values[0]:.4f} [{rn.ci95[0][0]:.4f}, {rn.ci95[0][1]:.4f}]", flush=True)
+            print(f"  draw {draw}: H {rn.values[0]:.4f} [{rn.ci95[0][0]:.4f}, {rn.ci95[0][1]:.4f}]",
+                  flush=True)
         rows.append(row)
     doc = {"settings": {"window_s": WINDOW_S, "tve_percent": TVE_PERCENT, "substeps": fit.substeps,
                         "max_relative_ci": cal.max_relative_ci},

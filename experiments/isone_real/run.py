@@ -164,7 +164,11 @@ def _report(entries, sens, wall_s):
         s, o = e["smape_percent"], e["online"]
         conv = "yes" if o["converged"] else "no: " + o.get("not_converged_reason", "")
         ci = e["H_ci95"]
-        why = "; ".join(k.replace("_", " ") for k in e["reasons"])
+        # H's reasons (they set the verdict), then the findings about D and the governor
+        par = e["parameters"]
+        found = par.get("D", {}).get("reasons", []) + par.get("governor_correction", {}).get("reasons", [])
+        why = "; ".join([k.replace("_", " ") for k in par["H"]["reasons"]]
+                        + ([f"findings: {', '.join(k.replace('_', ' ') for k in found)}"] if found else []))
         lines.append(
             f"| {e['name']} | {e['role']} | {e['data_quality']['median_p_pu_machine']:.3f} | "
             f"{f(e['H_s'])} | {f(ci[0])}-{f(ci[1])} | {e['verdict']}{f' ({why})' if why else ''} | "

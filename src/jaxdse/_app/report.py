@@ -13,7 +13,7 @@ from .._core.assess import Assessment
 from .._core.estimate import Replay
 from .._core.identify import Identified, condition_number
 from .._core.result import Estimate
-from .._core.verdict import NOTES, REASONS, VERDICTS, describe, online_verdict
+from .._core.verdict import FINDINGS, NOTES, REASONS, VERDICTS, describe, online_verdict
 
 
 def _playback(est: Estimate, rep: Replay | None):
@@ -189,8 +189,12 @@ def format_table(entries: list[dict]) -> str:
         ci_txt = "n/a" if not ci or ci[0] is None else \
             f"{ci[0]:.2f}-{'inf' if ci[1] is None else format(ci[1], '.2f')}"
         s = e["smape_percent"]
-        reasons = ", ".join(k.replace("_", " ") for k in e.get("reasons", {})
-                            if k not in ("drem_not_converged", "drem_disagrees"))
+        keys = list(e.get("reasons", {}))
+        # H's reasons set the verdict; the findings about D and the governor are said apart
+        reasons = ", ".join(k.replace("_", " ") for k in keys if k not in NOTES)
+        found = [k.replace("_", " ") for k in keys if k in FINDINGS]
+        if found:
+            reasons += ("; " if reasons else "") + "findings: " + ", ".join(found)
         lines.append(
             f"{e['name']:<{w}} {f(e['H_s'], '7.2f'):>7} {ci_txt:>16} {f(e['D'], '7.3f'):>7} "
             f"{e['verdict']:<17} {f(e['online']['H_s'], '8.2f'):>8} {f(s['I_t'], '6.2f'):>6} "

@@ -61,9 +61,6 @@ class AbstractGovernor(eqx.Module):
         """Torque reference T_ref that holds Tm = ``t_m`` at speed deviation ``dw`` in steady state."""
 
 
-
-
-
 class TGOV1(AbstractGovernor):
     """PSS/E TGOV1: valve 1/(1 + s T1) with non-windup limits, turbine (1 + s T2)/(1 + s T3), Dt.
 

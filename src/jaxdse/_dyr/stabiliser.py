@@ -58,8 +58,6 @@ INPUT_MODES = {
 with the same position (MODE 1 = ``speed_dev_pu`` ... MODE 6 = ``dvt_dt_pu_s``)."""
 
 
-
-
 def _check_mode(module, name: str, mode: int, allow_zero: bool = False) -> None:
     lo = 0 if allow_zero else 1
     if not lo <= mode <= 6:
