@@ -15,7 +15,8 @@ and the identifiable ones calibrated jointly (bounded Levenberg-Marquardt, ``jd.
   the share of 95 % intervals that contain the truth, per parameter and over all.
 
 To keep the cost down the fit uses the first ``WINDOW_S`` seconds of each event (10 s before,
-15 s after the event) and 2 fixed steps per frame. Writes calibration.json and calibration.md.
+15 s after the event) and 2 fixed steps per frame (``[calibrate] input_filter_hz`` as
+``jaxdse validate`` has it). Writes calibration.json and calibration.md.
 """
 
 import argparse
@@ -96,9 +97,9 @@ def main():
         doc["summary"] = summarise(doc["rows"], doc["coverage"], doc["summary"]["wall_s_total"])
         write(doc)
         return
-    fit = jd.PlaybackSettings(substeps=2)
-    cal = jd.CalibrationSettings()
     opts = jd.CalibrateOptions()
+    fit = jd.PlaybackSettings(substeps=2, input_filter_hz=opts.input_filter_hz)
+    cal = jd.CalibrationSettings()
     rows, cover = [], []
     t_all = time.perf_counter()
     for k, (case, tag, with_noise) in enumerate(MACHINES):
@@ -156,6 +157,7 @@ def main():
                   flush=True)
         rows.append(row)
     doc = {"settings": {"window_s": WINDOW_S, "tve_percent": TVE_PERCENT, "substeps": fit.substeps,
+                        "input_filter_hz": fit.input_filter_hz, "input_draws": cal.input_draws,
                         "max_relative_ci": cal.max_relative_ci},
            "summary": summarise(rows, cover, round(time.perf_counter() - t_all, 1)), "rows": rows,
            "coverage": cover}

@@ -70,6 +70,7 @@ from ._dyr.calibrate import stack_events as stack_events
 from ._dyr.calibrate import with_values as with_values
 from ._dyr.exciter import ESDC2A as ESDC2A
 from ._dyr.exciter import ESST3A as ESST3A
+from ._dyr.exciter import EXDC2 as EXDC2
 from ._dyr.exciter import EXST1 as EXST1
 from ._dyr.exciter import IEEEX1 as IEEEX1
 from ._dyr.exciter import SEXS as SEXS

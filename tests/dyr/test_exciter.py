@@ -1,11 +1,11 @@
-"""Tests of the PSS/E exciter modules SEXS, IEEEX1, ESDC2A, EXST1 and ESST3A.
+"""Tests of the PSS/E exciter modules SEXS, IEEEX1, EXDC2, ESDC2A, EXST1 and ESST3A.
 
 * steady state: ``initial_state`` holds (d(state)/dt = 0, Efd = Efd0) at several operating
   points, for the example .dyr records and for variants that exercise every branch;
 * small steps: the simulated response (RK4 on the module's vector field) equals the step
   response of the linear part built from the block diagram with ``scipy.signal``;
 * limits: large steps drive the limited signal to its limit and the non-windup limits let go
-  as soon as the error reverses; EXST1's and ESDC2A's limits scale with Vt and Ifd;
+  as soon as the error reverses; EXST1's, EXDC2's and ESDC2A's limits scale with Vt and Ifd;
 * zero time constants: no NaN in value or gradient; vmap over stacked parameter sets equals a
   loop; ``exciter_from_dyr`` parses the records and refuses bad ones.
 """
@@ -27,6 +27,7 @@ from jaxdse._dyr.exciter import (
     ESST3A,
     EXCITER_FIELDS,
     EXCITERS,
+    EXDC2,
     EXST1,
     IEEEX1,
     SEXS,
@@ -39,6 +40,7 @@ RECORDS = {  # from the test data (PSS/E CON order)
     "ESST3A": "0.02 0.2 -0.2 8 1 5  20 0 99 -99 1 3.67  0.435 5.48 0.01 0.0098 3.86 3.33  0.4 99 0",
     "EXST1": "0.02 99 -99 0 0.02 50  0.02 9999 -9999 0 0.01 1",
     "IEEEX1": "0 50 0.06 0 0 1  -1 -0.02 0.5 0.08 1 0  2 0.0016 3 1.73",
+    "EXDC2": "0 40 0.06 0 0 3.5  -3.5 1 0.8 0.03 1 0  2.4 0.03 5 0.5",
     "SEXS": "0.1 10 100 0.05 0 5",
 }
 
@@ -88,6 +90,7 @@ def linear_exst1(**kw):
 ZERO_T = {  # every optional time constant 0 (the output block stays dynamic)
     "SEXS": SEXS(t_b_s=0.0),
     "IEEEX1": IEEEX1(t_r_s=0.0, t_a_s=0.0, t_b_s=0.0, t_c_s=0.0, t_f_s=0.0, ke=0.0),
+    "EXDC2": EXDC2(t_r_s=0.0, t_a_s=0.0, t_b_s=0.0, t_c_s=0.0, t_f_s=0.0),
     "ESDC2A": ESDC2A(t_r_s=0.0, t_a_s=0.0, t_b_s=0.0, t_c_s=0.0, t_f_s=0.0, se1=0.0, se2=0.0),
     "EXST1": EXST1(t_r_s=0.0, t_b_s=0.0, t_c_s=0.0, t_f_s=0.0, kc=0.0),
     "ESST3A": ESST3A(t_r_s=0.0, t_b_s=0.0, t_c_s=0.0, t_a_s=0.0),
@@ -100,6 +103,7 @@ STEADY_MODELS = {
     **{f"{name}-default": cls() for name, cls in EXCITERS.items()},
     **{f"{name}-zeroT": m for name, m in ZERO_T.items()},
     "IEEEX1-KE0": IEEEX1(ke=0.0),
+    "EXDC2-KE0": EXDC2(ke=0.0, t_r_s=0.02, t_b_s=0.5, t_c_s=0.2),
     "ESDC2A-KE0-sat": ESDC2A(ke=0.0, t_r_s=0.01, t_b_s=0.5, t_c_s=0.2),
     "ESST3A-VGlim": ESST3A(vg_max_pu=1.5),
     "ESST3A-VBlim": ESST3A(vb_max_pu=4.0),
@@ -226,7 +230,7 @@ def transfer_to_efd(model, inputs):
         lln, lld = _lead_lag(f("ta_tb") * f("t_b_s"), f("t_b_s"))
         return _poly(lln, [f("k")]), _poly(lld, [f("t_e_s"), 1.0])
     lln, lld = _lead_lag(f("t_c_s"), f("t_b_s"))
-    if isinstance(model, (IEEEX1, ESDC2A)):
+    if isinstance(model, (IEEEX1, EXDC2, ESDC2A)):
         fn = _poly(lln, [f("ka")])
         fd = _poly(lld, [f("t_a_s"), 1.0], [f("t_e_s"), f("ke")])
         return _feedback(fn, fd, [f("kf"), 0.0], [f("t_f_s"), 1.0])
@@ -243,6 +247,7 @@ LINEAR = {
     "SEXS": SEXS(ta_tb=0.2, t_b_s=2.0, k=50.0, t_e_s=0.1, e_min_pu=-10.0, e_max_pu=10.0),
     "SEXS-record": record("SEXS"),
     "IEEEX1": linear_dc(IEEEX1),
+    "EXDC2": linear_dc(EXDC2, t_b_s=0.4, t_c_s=0.1),
     "ESDC2A": linear_dc(ESDC2A, ke=0.8, t_b_s=0.0, t_r_s=0.0),
     "EXST1": linear_exst1(),
     "EXST1-record": record("EXST1"),
@@ -291,13 +296,13 @@ def test_sexs_nonwindup_limit():
     assert efd3[-1] == 0.0 and xs3[-1, 1] > -0.05  # EMIN = 0
 
 
-@pytest.mark.parametrize("cls", [IEEEX1, ESDC2A])
+@pytest.mark.parametrize("cls", [IEEEX1, EXDC2, ESDC2A])
 def test_dc_regulator_nonwindup_limit(cls):
     model = linear_dc(cls, vr_max_pu=3.0, vr_min_pu=-2.0, t_a_s=0.05, kf=0.0)
     efd0, inputs = OPS[0]
     inputs = inputs._replace(vt_pu=jnp.asarray(0.9))
     x0, vref = model.initial_state(efd0, inputs)
-    scale = 0.9 if cls is ESDC2A else 1.0  # ESDC2A: limits times Vt
+    scale = 0.9 if cls in (EXDC2, ESDC2A) else 1.0  # EXDC2, ESDC2A: limits times Vt
     _, xs = simulate(model, x0, inputs, vref + 0.5, 0.5)
     vr = xs[:, 2]
     # held at the limit (within the overshoot of the step that reached it); windup: KA·u ~ 20
@@ -317,11 +322,12 @@ def test_esdc2a_efd_floor():
     efd2, xs2 = simulate(model, xs[-1], inputs, vref + 1.0, 0.3)
     k = int(np.argmax(xs2[:, 2] > 0.0))  # VR turns positive (it starts at Vt·VRMIN)
     assert 0 < k < 200 and efd2[k + 10] > 0.0 and efd2[-1] > 0.05  # EFD leaves the floor then
-    # IEEEX1 has no floor
-    model1 = linear_dc(IEEEX1, vr_min_pu=-5.0, kf=0.0)
-    x0, vref = model1.initial_state(efd0, inputs)
-    efd, _ = simulate(model1, x0, inputs, vref - 1.0, 3.0)
-    assert efd[-1] < -1.0
+    # IEEEX1 and EXDC2 have no floor
+    for cls in (IEEEX1, EXDC2):
+        model1 = linear_dc(cls, vr_min_pu=-5.0, kf=0.0)
+        x0, vref = model1.initial_state(efd0, inputs)
+        efd, _ = simulate(model1, x0, inputs, vref - 1.0, 3.0)
+        assert efd[-1] < -1.0, cls
 
 
 def test_exst1_field_voltage_limits_follow_vt_and_ifd():
@@ -416,6 +422,7 @@ def test_esst3a_without_source_voltage():
 BATCHES = {
     "SEXS": [SEXS(), record("SEXS"), ZERO_T["SEXS"]],
     "IEEEX1": [IEEEX1(), record("IEEEX1"), ZERO_T["IEEEX1"], IEEEX1(ke=0.0)],
+    "EXDC2": [EXDC2(), record("EXDC2"), ZERO_T["EXDC2"], EXDC2(ke=0.0)],
     "ESDC2A": [ESDC2A(), ZERO_T["ESDC2A"], linear_dc(ESDC2A)],
     "EXST1": [EXST1(), record("EXST1"), ZERO_T["EXST1"]],
     "ESST3A": [ESST3A(), record("ESST3A"), ZERO_T["ESST3A"], ZERO_T["ESST3A-TM0"],
@@ -456,6 +463,8 @@ def test_records_parse():
     assert float(ieeex1.ke) == -0.02 and float(ieeex1.t_r_s) == 0.0 and float(ieeex1.se2) == 1.73
     assert float(record("SEXS").ta_tb) == 0.1
     assert float(record("EXST1").kf) == 0.01
+    exdc2 = record("EXDC2")
+    assert float(exdc2.vr_max_pu) == 3.5 and float(exdc2.ke) == 1.0 and exdc2.ke_zero == "psse"
 
 
 def test_dc_vrmax_zero_is_computed():
@@ -466,6 +475,7 @@ def test_dc_vrmax_zero_is_computed():
     assert float(model.vr_min_pu) == pytest.approx(-1.73 * 3.0)
     cons[7] = 1.0  # KE > 0: (SE(E2) + KE)·E2
     assert float(exciter_from_dyr("ESDC2A", cons).vr_max_pu) == pytest.approx(2.73 * 3.0)
+    assert float(exciter_from_dyr("EXDC2", cons).vr_max_pu) == pytest.approx(2.73 * 3.0)
 
 
 @pytest.mark.parametrize("model, cons, match", [
@@ -478,6 +488,7 @@ def test_dc_vrmax_zero_is_computed():
     ("IEEEX1", [0, 50, 0.06, 0, 0, 1, -1, -0.02, -0.5, 0.08, 1, 0, 2, 0.0016, 3, 1.73],
      r"TE \(t_e_s\) must be > 0"),
     ("ESDC2A", [0, 50, 0.06, 0, 0, -1, 1, 1, 0.5, 0.08, 1, 0, 2, 0.0016, 3, 1.73], "VRMAX"),
+    ("EXDC2", [0, 50, 0.06, 0, 0, 1, -1, 1, 0.5, 0.08, 1, 0, 2, 0.0016, 3], "expected 16 constants"),
     ("EXST1", [0.02, 99, -99, 0, 0.02, 50, 0, 9999, -9999, 0, 0.01, 1], r"TA \(t_a_s\) must be > 0"),
     ("EXST1", [0.02, 99, -99, 0, 0.02, 50, 0.02, 9999, -9999, 0, 0.01, -1], r"TF \(t_f_s\) must be >= 0"),
     ("ESST3A", [0.02, 0.2, -0.2, 8, 1, 5, 20, 0, 99, -99, 1, 3.67, 0.435, 5.48, 0.01, 0.0098,

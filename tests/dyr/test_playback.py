@@ -20,7 +20,14 @@ import numpy as np
 import pytest
 
 from jaxdse._core.governor import IEEEG1, TGOV1
-from jaxdse._dyr.calibrate import Events, ParameterSpec, noise_level, with_values
+from jaxdse._dyr.calibrate import (
+    Events,
+    ParameterSpec,
+    long_run_covariance,
+    noise_level,
+    voltage_noise,
+    with_values,
+)
 from jaxdse._dyr.exciter import exciter_from_dyr
 from jaxdse._dyr.machine import GENCLS, GENROU, GENSAL
 from jaxdse._dyr.playback import (
@@ -314,3 +321,32 @@ def test_noise_level_of_white_noise_and_floor_on_a_ramp(rng):
     ev = Events(series=None, p_pu=jnp.asarray(0.5 + ramp), q_pu=jnp.asarray(0.1 - 0.3 * ramp),
                 weight=jnp.ones((1, n)))
     np.testing.assert_array_equal(noise_level(ev, 1e-3), [1e-3, 1e-3])
+
+
+def test_voltage_noise_of_white_noise_on_a_swing(rng):
+    """The sd of ln|V| and of the angle from second differences: the noise, not the swing."""
+    n = 3000
+    t = np.arange(n) / 30.0
+    vm = 1.02 * (1 + 0.02 * np.sin(2 * np.pi * 0.3 * t)) * np.exp(4e-4 * rng.normal(size=n))
+    va = 0.3 + 0.01 * np.sin(2 * np.pi * 0.5 * t) + 3e-4 * rng.normal(size=n)
+    series = TerminalSeries(*(jnp.asarray(x)[None] for x in (t, vm, va, np.ones(n), np.zeros(n))))
+    ev = Events(series=series, p_pu=None, q_pu=None, weight=jnp.ones((1, n)))
+    np.testing.assert_allclose(voltage_noise(ev), [4e-4, 3e-4], rtol=0.1)
+    clean = series._replace(v_mag_pu=jnp.asarray(1.02 + 0.0 * t)[None],
+                            v_ang_rad=jnp.asarray(0.3 + 0.01 * t)[None])
+    assert np.all(voltage_noise(ev._replace(series=clean)) < 1e-9)
+
+
+def test_long_run_covariance_of_white_and_ar1_scores(rng):
+    """White scores: no lags, S = sum g g^T. AR(1) scores of lag-1 correlation 0.8: S per frame
+    near the long-run variance 1/(1 - 0.8)^2 = 25 (Bartlett is biased low, within 20 %)."""
+    g = rng.normal(size=(2, 5000, 1))
+    s, lag = long_run_covariance(g, 0.0, 5000.0)
+    assert lag == 0 and s[0, 0] == pytest.approx(float(np.sum(g ** 2)))
+    e = rng.normal(size=(4, 20000))
+    x = np.zeros_like(e)
+    for k in range(1, e.shape[1]):
+        x[:, k] = 0.8 * x[:, k - 1] + e[:, k]
+    s, lag = long_run_covariance(x[..., None], 0.8, 20000.0)
+    assert 20 < lag < 200
+    assert s[0, 0] / x.size == pytest.approx(25.0, rel=0.2)

@@ -189,7 +189,7 @@ FLEET.toml (paths relative to it):
                  max_rms_percent_mbase_q (2), event_s (10), ... (see fleet.json)
   [observer] [settings] [identify]   as in `jaxdse run`;  [output] figures = true
   [playback]     model = "surrogate" (3rd-order, identified H and D) | "dyr" (each unit's own
-                 PSS/E records: GENROU/GENSAL/GENCLS, SEXS/IEEEX1/ESDC2A/EXST1/ESST3A,
+                 PSS/E records: GENROU/GENSAL/GENCLS, SEXS/IEEEX1/EXDC2/ESDC2A/EXST1/ESST3A,
                  IEEEST/ST2CUT, TGOV1/IEEEG1/GAST/HYGOV/GGOV1, the recorded terminal voltage
                  imposed as PSS/E PLBVFU1 does; a unit with another model plays back the
                  surrogate and its page says which record); solver = "tsit5" | "kvaerno5";
@@ -232,8 +232,12 @@ CONFIG.toml is a fleet file (see `jaxdse fleet --help`) with, optionally:
                  parameters = ["H", "KA", "R"]     default: H, D, the exciter's main gain and
                    time constant, the governor's droop (IEEEG1: K) and main time constant
                  bounds = {H = [2.0, 8.0], KA = [10, 400]}   default [x/4, 4x]; D [-5, 20]
-                 max_relative_ci (0.1)  calibrate only what the events fix within +-10 %
+                 max_relative_ci (0.05) calibrate only what the events fix within +-5 %
                  noise_floor_pu (0.001), bound_factor (4), substeps (2: steps per frame in the fit)
+                 model_error (0.01)  the .dyr playback's own relative error, added to the
+                   intervals of positive parameters (noise alone covers H in 78 % on the bench)
+                 input_filter_hz (0: off)  low-pass the imposed voltage inside the fit (PMU
+                   noise on V biases H; a voltage-angle jump the step detector misses smears)
   [playback]     substeps, solver, ke_zero (model = "dyr" is implied)
 
 DIR gets:

@@ -12,7 +12,8 @@ The file is a fleet file (``[case]``, ``[measurement]``, ``[channels]`` or ``[[u
    parameters these events cannot pin down within ``max_relative_ci`` stay at their .dyr value
    and the page says so;
 3. calibrated: the identifiable ones by bounded Levenberg-Marquardt on all events jointly, with
-   95 % intervals (Gauss-Newton, corrected for residual autocorrelation): the *after* playback.
+   95 % intervals (Gauss-Newton: the residuals' long-run covariance, and the imposed voltage's
+   noise drawn again through the fitted model): the *after* playback.
 
 Writes validate.json, report.html (with units/<name>.html and .png: P/f and Q/V overlays before
 and after) and calibrated.dyr (only the changed records, PSS/E syntax).
@@ -57,6 +58,7 @@ DEFAULT_PARAMETERS = {
     "machine": (("h_s", "H"), ("d_pu", "D")),
     "SEXS": (("k", "K"), ("t_e_s", "TE")),
     "IEEEX1": (("ka", "KA"), ("t_a_s", "TA")),
+    "EXDC2": (("ka", "KA"), ("t_a_s", "TA")),
     "ESDC2A": (("ka", "KA"), ("t_a_s", "TA")),
     "EXST1": (("ka", "KA"), ("t_a_s", "TA")),
     "ESST3A": (("ka", "KA"), ("t_m_s", "TM")),
@@ -147,9 +149,10 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     recordings += [(str(e),) for e in opts.events]
     files = [" + ".join(r) for r in recordings]
     playback = PlaybackSettings(substeps=fleet.playback.substeps, solver=fleet.playback.solver)
-    fit_settings = PlaybackSettings(substeps=opts.substeps, solver=fleet.playback.solver)
+    fit_settings = PlaybackSettings(substeps=opts.substeps, solver=fleet.playback.solver,
+                                    input_filter_hz=opts.input_filter_hz)
     cal = CalibrationSettings(max_relative_ci=opts.max_relative_ci,
-                              noise_floor_pu=opts.noise_floor_pu)
+                              noise_floor_pu=opts.noise_floor_pu, model_error=opts.model_error)
     progress = Progress(len(fleet.plants), stream)
     tables, units, changed = {}, [], []
     for p in fleet.plants:
@@ -242,6 +245,9 @@ def _unit_entry(um, specs, ranking, result, series, before, after, p) -> dict:
             "calibrated": result is not None,
             "converged": None if result is None else result.converged,
             "residual_autocorrelation": None if result is None else result.autocorrelation,
+            "residual_bandwidth_frames": None if result is None else result.bandwidth_frames,
+            "voltage_noise": None if result is None else {
+                "ln_v_sd": float(result.voltage_noise[0]), "angle_sd_rad": float(result.voltage_noise[1])},
             "eigenvalues": ranking.eigenvalues.tolist(),
             "not_identifiable": [r for r in ranking.reasons if r]}
 

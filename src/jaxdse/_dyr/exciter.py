@@ -1,4 +1,4 @@
-"""PSS/E excitation-system models: SEXS, IEEEX1, ESDC2A, EXST1 and ESST3A as equinox modules.
+"""PSS/E excitation-system models: SEXS, IEEEX1, EXDC2, ESDC2A, EXST1 and ESST3A as equinox modules.
 
 Every model subclasses :class:`~jaxdse._dyr.base.AbstractExciter` (machine base, per unit,
 seconds). Conventions shared by all of them:
@@ -145,15 +145,15 @@ class SEXS(AbstractExciter):
         return jnp.clip(state[1], self.e_min_pu, self.e_max_pu)
 
 
-# --- DC exciters: IEEEX1, ESDC2A --------------------------------------------------------------
+# --- DC exciters: IEEEX1, EXDC2, ESDC2A -------------------------------------------------------
 
 class _DCExciter(AbstractExciter):
-    """Common part of the PSS/E DC commutator exciters IEEEX1 and ESDC2A.
+    """Common part of the PSS/E DC commutator exciters IEEEX1, EXDC2 and ESDC2A.
 
         VM  = EC/(1 + s TR)
         u   = Vref + VOTHSG - VM - VF
         y   = (1 + s TC)/(1 + s TB) u
-        VR  = KA/(1 + s TA) y, non-windup limits [VRMIN, VRMAX] (times EC for ESDC2A)
+        VR  = KA/(1 + s TA) y, non-windup limits [VRMIN, VRMAX] (times EC for EXDC2, ESDC2A)
         TE dEFD/dt = VR - (KE + SE(EFD)) EFD                        (exciter)
         VF  = s KF/(1 + s TF1) EFD                                  (rate feedback)
 
@@ -263,6 +263,21 @@ class IEEEX1(_DCExciter):
     limits [VRMIN, VRMAX] (non-windup), no limit on EFD. The PSS/E quadratic saturation
     (:func:`saturation_product`) and the KE = 0 rule apply.
     """
+
+
+class EXDC2(_DCExciter):
+    """PSS/E EXDC2: the 1981 IEEE type DC2 excitation system.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "EXDC2"; IEEE Committee Report,
+    "Excitation system models for power system stability studies", IEEE Trans. PAS-100(2),
+    1981, type DC2): as :class:`IEEEX1` (see :class:`_DCExciter`, the same 16 CONs) with the
+    regulator supplied from the terminal, so its limits scale with the terminal voltage,
+    [EC·VRMIN, EC·VRMAX] (non-windup). No limit on EFD (the floor at 0 is ESDC2A's). The
+    PSS/E quadratic saturation and the KE = 0 rule apply.
+    """
+
+    def _vr_limits(self, inputs: ExciterInputs):
+        return inputs.vt_pu * self.vr_min_pu, inputs.vt_pu * self.vr_max_pu
 
 
 class ESDC2A(_DCExciter):
@@ -533,7 +548,7 @@ class ESST3A(AbstractExciter):
 # --- PSS/E records ----------------------------------------------------------------------------
 
 EXCITERS: dict[str, type[AbstractExciter]] = {
-    "SEXS": SEXS, "IEEEX1": IEEEX1, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A}
+    "SEXS": SEXS, "IEEEX1": IEEEX1, "EXDC2": EXDC2, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A}
 """The exciter models by their PSS/E name."""
 
 _DC_CONS = ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF1", "Switch",
@@ -544,6 +559,7 @@ _DC_FIELDS = ("t_r_s", "ka", "t_a_s", "t_b_s", "t_c_s", "vr_max_pu", "vr_min_pu"
 EXCITER_FIELDS: dict[str, tuple[str, ...]] = {
     "SEXS": ("TA/TB", "TB", "K", "TE", "EMIN", "EMAX"),
     "IEEEX1": _DC_CONS,
+    "EXDC2": _DC_CONS,
     "ESDC2A": _DC_CONS,
     "EXST1": ("TR", "VIMAX", "VIMIN", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KC", "KF", "TF"),
     "ESST3A": ("TR", "VIMAX", "VIMIN", "KM", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KG", "KP",
@@ -554,6 +570,7 @@ EXCITER_FIELDS: dict[str, tuple[str, ...]] = {
 _ATTRIBUTES: dict[str, tuple[str, ...]] = {
     "SEXS": ("ta_tb", "t_b_s", "k", "t_e_s", "e_min_pu", "e_max_pu"),
     "IEEEX1": _DC_FIELDS,
+    "EXDC2": _DC_FIELDS,
     "ESDC2A": _DC_FIELDS,
     "EXST1": ("t_r_s", "vi_max_pu", "vi_min_pu", "t_c_s", "t_b_s", "ka", "t_a_s", "vr_max_pu",
               "vr_min_pu", "kc", "kf", "t_f_s"),
@@ -567,7 +584,7 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
                      ke_zero: Literal["psse", "literal"] = "psse") -> AbstractExciter:
     """The exciter of a PSS/E .dyr record: ``model`` (e.g. ``"ESST3A"``) and its CONs in order.
 
-    Conversions: ESST3A THETAP from degrees to radians. DC exciters (IEEEX1, ESDC2A): VRMAX = 0
+    Conversions: ESST3A THETAP from degrees to radians. DC exciters (IEEEX1, EXDC2, ESDC2A): VRMAX = 0
     is PSS/E's "compute the limits" entry, VRMAX = (SE(E2) + KE)·E2 for KE > 0 and SE(E2)·E2
     otherwise, VRMIN = -VRMAX (PSS/E Program Application Guide, as OpenIPSL implements it);
     KE = 0 is kept (KE then follows from the initial EFD, see :class:`IEEEX1`). With
@@ -593,13 +610,14 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
     kwargs = dict(zip(_ATTRIBUTES[name], values))
     if name == "ESST3A":
         kwargs["theta_p_rad"] = math.radians(kwargs["theta_p_rad"])
-    if name in ("IEEEX1", "ESDC2A") and kwargs["vr_max_pu"] == 0.0 and ke_zero == "literal":
+    dc = name in ("IEEEX1", "EXDC2", "ESDC2A")
+    if dc and kwargs["vr_max_pu"] == 0.0 and ke_zero == "literal":
         kwargs["vr_max_pu"] = math.inf
-    elif name in ("IEEEX1", "ESDC2A") and kwargs["vr_max_pu"] == 0.0:
+    elif dc and kwargs["vr_max_pu"] == 0.0:
         ke, se2, e2 = kwargs["ke"], kwargs["se2"], kwargs["e2_pu"]
         vr_max = (se2 + ke) * e2 if ke > 0 else se2 * e2
         kwargs["vr_max_pu"], kwargs["vr_min_pu"] = vr_max, -vr_max
-    if name in ("IEEEX1", "ESDC2A"):
+    if dc:
         kwargs["ke_zero"] = ke_zero
     try:
         return EXCITERS[name](**kwargs)
@@ -610,5 +628,5 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
         raise ValueError(message if message.startswith(name) else f"{name}: {message}") from None
 
 
-__all__ = ["ESDC2A", "ESST3A", "EXCITERS", "EXCITER_FIELDS", "EXST1", "IEEEX1", "SEXS",
+__all__ = ["ESDC2A", "ESST3A", "EXCITERS", "EXCITER_FIELDS", "EXDC2", "EXST1", "IEEEX1", "SEXS",
            "exciter_from_dyr", "rectifier_fex", "saturation", "saturation_product"]
