@@ -10,7 +10,10 @@ P, Q and rotor angle are compared with ANDES's:
 
 * RMS error of P and Q over the 70 s [% of MBASE];
 * the peak error in the event window (10-20 s) as a share of the measured peak deviation from
-  the pre-event value [%];
+  the pre-event value [%], and where it sits; and the same without the 3 frames after a
+  switching step (``jd.stack_events``' weights: inside one frame interval the machine's
+  subtransient answer to a step depends on when in the interval it switched, which frames
+  cannot tell; the calibration leaves those frames out for that reason);
 * the largest rotor-angle error against the truth files [deg].
 
 All units of one model structure run in one vmapped call; the wall time per unit is measured
@@ -60,7 +63,8 @@ def stack(trees):
     return jax.tree.map(lambda *x: jnp.stack(x), *trees)
 
 
-def scores(t, p_meas, q_meas, res, delta_truth) -> dict:
+def scores(t, p_meas, q_meas, res, delta_truth, settled) -> dict:
+    """``settled``: False on the frames right after a switching step."""
     pre = t < T_EVENT_S
     ev = (t >= T_EVENT_S) & (t < T_EVENT_S + EVENT_WINDOW_S)
     out = {}
@@ -70,6 +74,9 @@ def scores(t, p_meas, q_meas, res, delta_truth) -> dict:
         dev = float(np.max(np.abs(meas[ev] - np.mean(meas[pre]))))
         out[f"event_peak_dev_{k}_pu"] = dev
         out[f"event_peak_err_{k}_percent_of_dev"] = float(100 * np.max(np.abs(err[ev])) / max(dev, 1e-12))
+        out[f"event_peak_err_{k}_at_s"] = float(t[ev][np.argmax(np.abs(err[ev]))])
+        out[f"event_peak_err_{k}_after_step_percent_of_dev"] = float(
+            100 * np.max(np.abs(err[ev & settled])) / max(dev, 1e-12))
     out["max_angle_err_deg"] = float(np.rad2deg(np.max(np.abs(res.delta_rad - delta_truth))))
     return out
 
@@ -124,7 +131,8 @@ def main():
             rows.append(dict(case=j["case"], event=j["event"], tag=j["tag"],
                              structure="/".join(j["model"].structure), ok=bool(r.ok),
                              notes=j["model"].notes,
-                             **scores(np.asarray(j["series"].t_s), p_meas, q_meas, r, j["delta"])))
+                             **scores(np.asarray(j["series"].t_s), p_meas, q_meas, r, j["delta"],
+                                      np.asarray(jd.stack_events([j["series"]]).weight[0]) > 0)))
     done = [r for r in rows if r.get("structure")]
     summary = {
         "machine_recordings": len(rows), "played_back": len(done),
@@ -137,6 +145,9 @@ def main():
         "event_peak_within_10_percent": int(sum(max(r["event_peak_err_P_percent_of_dev"],
                                                     r["event_peak_err_Q_percent_of_dev"]) <= TARGET_PEAK
                                                 for r in done)),
+        "event_peak_within_10_percent_after_step": int(sum(
+            max(r["event_peak_err_P_after_step_percent_of_dev"],
+                r["event_peak_err_Q_after_step_percent_of_dev"]) <= TARGET_PEAK for r in done)),
         "angle_within_0.5_deg": int(sum(r["max_angle_err_deg"] <= TARGET_ANGLE for r in done)),
     }
     doc = {"settings": {"solver": settings.solver, "substeps": settings.substeps, "ke_zero": args.ke_zero},
@@ -165,7 +176,9 @@ def report(doc) -> str:
         f"(target {TARGET_MAX} %)",
         f"- both within {TARGET_MAX} %: {s['within_0.5_percent']} of {s['played_back']}",
         f"- event-window peak error within {TARGET_PEAK} % of the measured peak deviation (P and Q): "
-        f"{s['event_peak_within_10_percent']} of {s['played_back']}",
+        f"{s['event_peak_within_10_percent']} of {s['played_back']}; without the 3 frames after a "
+        f"detected switching step: {s['event_peak_within_10_percent_after_step']} of {s['played_back']} "
+        "(the recordings over 10 % are listed below the table)",
         f"- rotor angle within {TARGET_ANGLE} deg of the truth: {s['angle_within_0.5_deg']} of "
         f"{s['played_back']}",
         "",
@@ -183,6 +196,22 @@ def report(doc) -> str:
                      f"{r['event_peak_err_P_percent_of_dev']:.1f} | "
                      f"{r['event_peak_err_Q_percent_of_dev']:.1f} | "
                      f"{r['max_angle_err_deg']:.3f} |")
+    over = [r for r in doc["rows"] if r.get("structure") and max(
+        r["event_peak_err_P_percent_of_dev"], r["event_peak_err_Q_percent_of_dev"]) > TARGET_PEAK]
+    if over:
+        lines += ["", f"Event-window peak errors over {TARGET_PEAK} % of the peak deviation, where "
+                  "they sit, and the peak without the 3 frames after a voltage step that "
+                  "`voltage_steps` finds at that terminal (the event switches at 10 s; the frame "
+                  "interval is 1/60 s). Where it finds none, the playback ramps the voltage over the "
+                  "switching interval and the two figures are the same:", "",
+                  "| case | event | unit | P [%] at [s] | Q [%] at [s] | P after step [%] | "
+                  "Q after step [%] |", "|---|---|---|---|---|---|---|"]
+        for r in over:
+            lines.append(f"| {r['case']} | {r['event']} | {r['tag']} | "
+                         f"{r['event_peak_err_P_percent_of_dev']:.1f} at {r['event_peak_err_P_at_s']:.4f} | "
+                         f"{r['event_peak_err_Q_percent_of_dev']:.1f} at {r['event_peak_err_Q_at_s']:.4f} | "
+                         f"{r['event_peak_err_P_after_step_percent_of_dev']:.1f} | "
+                         f"{r['event_peak_err_Q_after_step_percent_of_dev']:.1f} |")
     lines += ["", "Cost per structure (one vmapped call, second call, 2-core CPU):", "",
               "| structure | units | first call incl. compile [s] | wall [s] | per unit [s] |",
               "|---|---|---|---|---|"]
