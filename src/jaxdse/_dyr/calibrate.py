@@ -86,7 +86,7 @@ class CalibrationSettings:
     atol: float = 1e-10
     max_steps: int = 64
     input_draws: int = 32
-    """Draws of the imposed voltage's noise for the input part of the intervals (0: none)."""
+    """Draws of the imposed voltage's noise for the input part of the intervals (0 or 1: none)."""
     model_error: float = 0.01
     """Relative error [-] that the playback of .dyr records carries against another simulator
     whatever the data, added in quadrature to the 95 % half-width of each positive parameter
