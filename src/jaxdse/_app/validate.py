@@ -12,8 +12,9 @@ The file is a fleet file (``[case]``, ``[measurement]``, ``[channels]`` or ``[[u
    parameters these events cannot pin down within ``max_relative_ci`` stay at their .dyr value
    and the page says so;
 3. calibrated: the identifiable ones by bounded Levenberg-Marquardt on all events jointly, with
-   95 % intervals (Gauss-Newton: the residuals' long-run covariance, and the imposed voltage's
-   noise drawn again through the fitted model): the *after* playback.
+   95 % intervals (Gauss-Newton: the residuals' long-run covariance, the imposed voltage's
+   noise drawn again through the fitted model, the events' disagreement, and ``model_error``;
+   see :mod:`jaxdse._dyr.calibrate`): the *after* playback.
 
 Writes validate.json, report.html (with units/<name>.html and .png: P/f and Q/V overlays before
 and after) and calibrated.dyr (only the changed records, PSS/E syntax).

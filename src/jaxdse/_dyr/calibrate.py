@@ -13,7 +13,7 @@ noise level. Then
 * optimistix's Levenberg-Marquardt fits the identifiable ones within the engineer's bounds, in
   log-logistic coordinates (positive parameters) or logistic ones (signed, e.g. D);
 * the 95 % intervals come from the Gauss-Newton covariance at the solution, the sum of three
-  parts (``A = J^T J``):
+  parts (``A = J^T J``), and a model error:
 
   - the residuals': a sandwich ``A^-1 S A^-1``, ``S`` the long-run covariance of the scores
     ``J_t^T r_t`` (Bartlett weights, bandwidth from the residuals' lag-1 autocorrelation,
@@ -138,26 +138,27 @@ def stack_events(series_list, weights=None, step_frames: int = STEP_FRAMES) -> E
     return Events(series, p, q, w)
 
 
+def _white_sd(y, keep=None) -> float:
+    """Robust standard deviation of the white noise on ``y`` [..., T]: 1.4826 MAD of its second
+    differences / sqrt(6) (a smooth signal's second differences are ~0); ``keep`` selects the
+    second differences counted (flattened). 0 when none is left."""
+    d2 = np.diff(np.asarray(y), 2, axis=-1).ravel()
+    d2 = d2 if keep is None else d2[keep]
+    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0) if d2.size else 0.0
+
+
 def noise_level(events: Events, floor: float) -> np.ndarray:
-    """(sigma_P, sigma_Q) [pu]: robust std of second differences / sqrt(6), floored."""
-    out = []
-    for y in (np.asarray(events.p_pu), np.asarray(events.q_pu)):
-        d2 = np.diff(y, 2, axis=-1).ravel()
-        s = 1.4826 * np.median(np.abs(d2 - np.median(d2))) / np.sqrt(6.0)
-        out.append(max(float(s), floor))
-    return np.asarray(out)
+    """(sigma_P, sigma_Q) [pu]: :func:`_white_sd` of P and Q, floored."""
+    return np.asarray([max(_white_sd(y), floor) for y in (events.p_pu, events.q_pu)])
 
 
 def voltage_noise(events: Events) -> np.ndarray:
-    """(sd of ln|V| [-], sd of the voltage angle [rad]) per frame: robust std of second
-    differences / sqrt(6), as :func:`noise_level`, over the weighted (valid) frames."""
+    """(sd of ln|V| [-], sd of the voltage angle [rad]) per frame: :func:`_white_sd` over the
+    weighted (valid) frames."""
     w = np.asarray(events.weight) > 0
     inside = (w[..., 2:] & w[..., 1:-1] & w[..., :-2]).ravel()
-    out = []
-    for y in (np.log(np.asarray(events.series.v_mag_pu)), np.asarray(events.series.v_ang_rad)):
-        d2 = np.diff(y, 2, axis=-1).ravel()[inside]
-        out.append(1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / np.sqrt(6.0) if d2.size else 0.0)
-    return np.asarray(out)
+    return np.asarray([_white_sd(np.log(np.asarray(events.series.v_mag_pu)), inside),
+                       _white_sd(events.series.v_ang_rad, inside)])
 
 
 def long_run_covariance(scores: np.ndarray, lag1: float, frames: float) -> tuple[np.ndarray, int]:
