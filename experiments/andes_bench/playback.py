@@ -178,7 +178,8 @@ def report(doc) -> str:
         f"- event-window peak error within {TARGET_PEAK} % of the measured peak deviation (P and Q): "
         f"{s['event_peak_within_10_percent']} of {s['played_back']}; without the 3 frames after a "
         f"detected switching step: {s['event_peak_within_10_percent_after_step']} of {s['played_back']} "
-        "(the recordings over 10 % are listed below the table)",
+        + ("(the recordings over 10 % are listed below the table)" if s['event_peak_within_10_percent']
+         < s['played_back'] else "(none over 10 %)"),
         f"- rotor angle within {TARGET_ANGLE} deg of the truth: {s['angle_within_0.5_deg']} of "
         f"{s['played_back']}",
         "",

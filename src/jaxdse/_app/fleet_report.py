@@ -131,7 +131,8 @@ def plot_playback(e: dict, tr: dict, path: Path) -> None:
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time [s] (shaded: event window)")
     fig.suptitle(f"{e['name']}: measured vs simulated — {e['verdict']}", fontsize=11)
-    fig.tight_layout()
+    # fixed margins: tight_layout measures every tick label and took 0.3 s of 0.4 s per unit
+    fig.subplots_adjust(left=0.1, right=0.98, bottom=0.07, top=0.94, hspace=0.12)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

@@ -43,9 +43,10 @@ class PlaybackSettings(eqx.Module):
     atol: float = eqx.field(static=True, default=1e-9)
     """Absolute tolerance ("kvaerno5")."""
     step_ratio: float = eqx.field(static=True, default=4.0)
-    """A change of the voltage phasor between two frames this many times larger than each of
-    the two changes before and after it (and ``step_factor`` times the median change) is a
-    switching step, held from the frame after it, not a ramp."""
+    """A jump of the voltage phasor between two frames this many times larger than the smooth
+    curvature around it (and ``step_factor`` times the median second difference) is a switching
+    step: the post-event trajectory is extended back to it, not ramped over the interval
+    (:func:`voltage_steps`)."""
     step_factor: float = eqx.field(static=True, default=10.0)
     """See ``step_ratio`` and :func:`voltage_steps`."""
     input_filter_hz: float = eqx.field(static=True, default=0.0)
@@ -108,16 +109,21 @@ def initial_operating_point(series: TerminalSeries, settings: PlaybackSettings):
 
 def voltage_steps(series: TerminalSeries, settings: PlaybackSettings):
     """Per frame interval: True where the voltage phasor jumps (a switching event between two
-    frames): its change |V(k+1) - V(k)| exceeds ``step_ratio`` times each of the two changes
-    before and after it, and ``step_factor`` times the median second difference |V(k+1) - 2 V(k)
-    + V(k-1)| (the noise: a steady frequency offset turns the phasor by the same angle each
-    frame, which a first difference would count)."""
+    frames). A jump J between frames k and k+1 puts +J and -J into the second differences
+    d2 = V(j+1) - 2 V(j) + V(j-1) at frames k and k+1; the jump |d2(k) - d2(k+1)| / 2 must exceed
+    ``step_ratio`` times the smooth curvature around it (|d2| at frames k-1 and k+2, and the
+    part common to both, |d2(k) + d2(k+1)| / 2) and ``step_factor`` times the median |d2| (the
+    noise). Second differences, not first: a steady frequency offset turns the phasor by the same
+    angle each frame, and after a large event the phasor rotates fast while it jumps."""
     v = series.v_mag_pu * jnp.exp(1j * series.v_ang_rad)
-    dv = jnp.abs(jnp.diff(v))
-    pad = jnp.pad(dv, 2, mode="edge")
-    near = jnp.max(jnp.stack([pad[:-4], pad[1:-3], pad[3:-1], pad[4:]]), axis=0)
-    noise = jnp.median(jnp.abs(jnp.diff(v, 2)))
-    return (dv > settings.step_ratio * near) & (dv > settings.step_factor * noise)
+    d2 = jnp.diff(v, 2)
+    p = jnp.pad(d2, 2)  # p[k + 1]: d2 at frame k (0 at the ends)
+    k = jnp.arange(v.shape[0] - 1)
+    a, b = p[k + 1], p[k + 2]
+    jump = jnp.abs(a - b) / 2
+    smooth = jnp.maximum(jnp.maximum(jnp.abs(p[k]), jnp.abs(p[k + 3])), jnp.abs(a + b) / 2)
+    noise = jnp.median(jnp.abs(d2))
+    return (jump > settings.step_ratio * smooth) & (jump > settings.step_factor * noise)
 
 
 def _filtered(x, step, dt, cutoff_hz):
@@ -129,11 +135,12 @@ def _filtered(x, step, dt, cutoff_hz):
 
 def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s):
     """s -> UnitInputs, s the time in frames from the first (``(t - ts[0]) / dt``): |V| and its
-    angle linear between frames, except across a voltage step,
-    where the frame after the step holds over the whole interval (a switching event happens
-    just after the frame before it). Left-continuous at the frames, so that a fixed step
-    that starts at a frame sees the step only from its second stage on (Tsit5's first-stage
-    weight is 0.1, its last stage's 2.3)."""
+    angle linear between frames, except across a voltage step: a switching event happens just
+    after the frame before it, so over that interval the line of the next interval is extended
+    back to the switching instant (the post-event trajectory, not a hold of the frame after the
+    step, nor a ramp). Left-continuous at the frames, so that a fixed step that starts at a frame
+    sees the step only from its second stage on (Tsit5's first-stage weight is 0.1, its last
+    stage's 2.3)."""
     ts, vm, th = series.t_s, series.v_mag_pu, series.v_ang_rad
     dt = ts[1] - ts[0]
     step = voltage_steps(series, settings)
@@ -143,11 +150,17 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
 
     def inputs(s):  # s: time in frames from the first, (t - ts[0]) / dt
         k = jnp.clip(jnp.ceil(s - 1e-9).astype(int) - 1, 0, n - 2)
-        frac = jnp.where(step[k], 1.0, s - k)
-        dvm, dth = vm[k + 1] - vm[k], th[k + 1] - th[k]
-        m, a = vm[k] + frac * dvm, th[k] + frac * dth
-        rate = jnp.where(step[k], 0.0, 1.0 / dt)
-        return UnitInputs(m * jnp.cos(a), m * jnp.sin(a), dth * rate / omega_s, dvm * rate)
+        # Indices from s alone (the same for every unit under vmap: slices, not gathers); across
+        # a step, the next interval's line (held, at the last interval).
+        k2 = jnp.minimum(k + 2, n - 1)
+
+        def line(x):
+            this, after = x[k + 1] - x[k], x[k2] - x[k + 1]
+            return jnp.where(step[k], x[k + 1] + (s - k - 1) * after, x[k] + (s - k) * this), \
+                jnp.where(step[k], after, this)
+
+        (m, dvm), (a, dth) = line(vm), line(th)
+        return UnitInputs(m * jnp.cos(a), m * jnp.sin(a), dth / dt / omega_s, dvm / dt)
 
     return inputs
 

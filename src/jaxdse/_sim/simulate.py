@@ -241,16 +241,28 @@ def _grid_signals(sc: Scenario, ts, plant: Plant, e_g0, y_load0):
                        jnp.asarray(x_g))
 
 
-def _initial_conditions(sc: Scenario, plant: Plant, exc: Exciter):
+class _OperatingPoint(NamedTuple):
+    """The scenario's load-flow data as arrays (traced: one compile for all scenarios)."""
+
+    p_pu: Array
+    q_pu: Array
+    v_t_pu: Array
+    grid_x_pu: Array
+    load_p_pu: Array
+    load_q_pu: Array
+
+
+@eqx.filter_jit
+def _initial_conditions(op: _OperatingPoint, plant: Plant, exc: Exciter):
     """Load flow: machine (P, Q, V_t) -> aux, transformer, line, load, grid source, states."""
     m = plant.machine
     scale = plant.current_scale
-    v_t = jnp.asarray(sc.v_t_pu + 0j)
-    i_sg = jnp.conj((sc.p_pu + 1j * sc.q_pu) / v_t) / scale
+    v_t = op.v_t_pu + 0j
+    i_sg = jnp.conj((op.p_pu + 1j * op.q_pu) / v_t) / scale
     i_lv, p_lv = lv_current_from_machine(v_t, i_sg, 0.0, 0, plant.aux)
     v5, i5 = line_to_grid(*transformer_to_hv(v_t, i_lv, plant.transformer), plant.line)
-    y_load = (sc.load_p_pu - 1j * sc.load_q_pu) / jnp.abs(v5) ** 2
-    e_g0 = v5 - 1j * sc.grid_x_pu * (i5 - y_load * v5)
+    y_load = (op.load_p_pu - 1j * op.load_q_pu) / jnp.abs(v5) ** 2
+    e_g0 = v5 - 1j * op.grid_x_pu * (i5 - y_load * v5)
     alg = jax.tree_util.tree_map(lambda x: x[0], algebraic_observer(
         v_t[None], i_sg[None] * scale, jnp.zeros(1), m))
     delta, e_q1, i_d, t_e = alg.delta_rad, alg.e_q1_pu, alg.i_d_pu, alg.t_e_pu
@@ -260,6 +272,22 @@ def _initial_conditions(sc: Scenario, plant: Plant, exc: Exciter):
     gov0 = plant.governor.steady_state(t_ref, 0.0)
     y0 = jnp.concatenate([jnp.stack([delta, 0.0, e_q1, e_f / exc.k, e_f]), gov0])
     return y0, e_g0, y_load, v_ref, t_ref, p_lv
+
+
+@eqx.filter_jit
+def _network_and_truth(plant: Plant, states, v_t, i_sg):
+    """Substation phasors and the true trajectories from the integrated states."""
+    m = plant.machine
+    i_lv = lv_currents(v_t, i_sg, plant.aux)
+    v5, i5 = line_to_grid(*transformer_to_hv(v_t, i_lv, plant.transformer), plant.line)
+    delta, x2, e_q1, e_f = states[:, 0], states[:, 1], states[:, 2], states[:, 4]
+    i_m = i_sg * plant.current_scale
+    dq = i_m * jnp.exp(-1j * (delta - jnp.pi / 2))
+    t_e = electrical_torque(e_q1, jnp.real(dq), jnp.imag(dq), m)
+    t_m = jax.vmap(plant.governor.torque)(states[:, 5:], x2 / m.omega_s)
+    truth = Truth(delta_rad=delta, x2_rad_s=x2, e_q1_pu=e_q1, t_e_pu=t_e, t_m_pu=t_m,
+                  e_f_pu=e_f, v_t=v_t, i_sg=i_sg, a1=m.a1, a2=m.a2)
+    return v5, i5, truth
 
 
 def _frequency(theta, dt, f0):
@@ -274,25 +302,18 @@ def simulate(plant: Plant, scenario: Scenario, exciter: Exciter = Exciter(),
              ) -> Simulation:
     """Simulate the plant and return a substation PMU recording with its ground truth."""
     sc = scenario
-    m = plant.machine
     n = int(round(sc.duration_s * sc.frame_rate_hz)) + 1
     ts_np = np.arange(n) / sc.frame_rate_hz
-    y0, e_g0, y_load0, v_ref, t_ref, p_lv0 = _initial_conditions(sc, plant, exciter)
+    op = _OperatingPoint(*(jnp.asarray(float(x)) for x in (
+        sc.p_pu, sc.q_pu, sc.v_t_pu, sc.grid_x_pu, sc.load_p_pu, sc.load_q_pu)))
+    y0, e_g0, y_load0, v_ref, t_ref, p_lv0 = _initial_conditions(op, plant, exciter)
     grid = _grid_signals(sc, ts_np, plant, complex(e_g0), complex(y_load0))
     states, v_t, i_sg, ok = _run(plant, exciter, v_ref, t_ref, y0, p_lv0, jnp.asarray(ts_np), grid,
                                  integrator)
     if not bool(ok):
         raise RuntimeError("plant simulation failed (solver step limit); check the scenario")
-    i_lv = jax.jit(lv_currents)(v_t, i_sg, plant.aux)
-    v5, i5 = line_to_grid(*transformer_to_hv(v_t, i_lv, plant.transformer), plant.line)
-    delta, x2, e_q1, e_f = states[:, 0], states[:, 1], states[:, 2], states[:, 4]
-    i_m = i_sg * plant.current_scale
-    dq = i_m * jnp.exp(-1j * (delta - jnp.pi / 2))
-    t_e = electrical_torque(e_q1, jnp.real(dq), jnp.imag(dq), m)
-    t_m = jax.vmap(plant.governor.torque)(states[:, 5:], x2 / m.omega_s)
-    truth = Truth(delta_rad=delta, x2_rad_s=x2, e_q1_pu=e_q1, t_e_pu=t_e, t_m_pu=t_m,
-                  e_f_pu=e_f, v_t=v_t, i_sg=i_sg, a1=m.a1, a2=m.a2)
-    return _measure(sc, ts_np, np.asarray(v5), np.asarray(i5), float(m.f_nominal_hz), truth)
+    v5, i5, truth = _network_and_truth(plant, states, v_t, i_sg)
+    return _measure(sc, ts_np, np.asarray(v5), np.asarray(i5), float(plant.machine.f_nominal_hz), truth)
 
 
 @eqx.filter_jit
