@@ -209,13 +209,6 @@ def xdist_scope(nodeid: str) -> str:
 
 
 @pytest.hookimpl(optionalhook=True)
-def pytest_xdist_auto_num_workers(config):
-    """One worker more than cores (``-n auto``): a worker waits on subprocesses, file output and
-    tracing gaps, and a third fills them (measured on 2 cores: see README's test command)."""
-    return (os.cpu_count() or 1) + 1
-
-
-@pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """``--dist loadscope`` with ``xdist_scope`` as the scope (xdist's own ``loadgroup`` reads
     marks through ``item._nodeid``, which pytest 9 no longer uses for the node id)."""
