@@ -130,8 +130,9 @@ def assess_jit():
 
 @pytest.fixture(scope="session")
 def isone_run(tmp_path_factory):
-    """``jaxdse run examples/isone_mat.toml`` on the REAL ISO-NE recording, once, in-process:
-    (exit status, stderr, summary.json). The CLI test and the results-regression tests read it."""
+    """``jaxdse run examples/isone_mat.toml`` on the REAL ISO-NE recording, once, in-process
+    (figures off): (exit status, stderr, summary.json). The CLI test and the results-regression
+    tests read it."""
     import io
     import json
 
@@ -140,9 +141,17 @@ def isone_run(tmp_path_factory):
     if not (SHARED_DATA / "isone_oscillation" / "case3row.mat").exists():
         pytest.skip("the shared ISO-NE recording is not beside the checkout")
     out = tmp_path_factory.mktemp("isone")
+    # The shipped config as it is, with its figures off (no test reads them; ~8 s): the data
+    # path made absolute, as the copy sits in a temporary folder.
+    text = (ROOT / "examples" / "isone_mat.toml").read_text()
+    text = text.replace('file = "../../shared/', f'file = "{ROOT.parent / "shared"}/')
+    config = out / "isone_mat.toml"
+    config.write_text(text.replace('[output]\ndir = "isone_out"',
+                                   '[output]\ndir = "isone_out"\nfigures = false'))
+    assert "figures = false" in config.read_text() and str(SHARED_DATA) in config.read_text()
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), optimised():
-        rc = main(["run", str(ROOT / "examples" / "isone_mat.toml"), "--out", str(out)])
+        rc = main(["run", str(config), "--out", str(out)])
     summary = json.loads((out / "summary.json").read_text()) if rc == 0 else None
     return rc, err.getvalue(), summary
 
@@ -186,9 +195,10 @@ on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``as
 (demo)."""
 
 
-LONGEST_FIRST = ("tests/many/test_tune.py", "pipeline", "tests/app/test_dyr_playback.py", "isone", "demo",
-                 "tests/app/test_compiles.py", "tests/many/test_batch.py", "tests/many/test_stream.py",
-                 "tests/app/test_fleet.py", "tests/core/test_events.py", "tests/core/test_estimate.py")
+LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py",
+                 "tests/core/test_estimate.py", "tests/many/test_batch.py", "demo", "isone",
+                 "tests/core/test_governor.py", "tests/core/test_events.py", "tests/many/test_stream.py",
+                 "tests/app/test_fleet.py", "tests/core/test_drem.py", "tests/app/test_compiles.py")
 """Work units that took longest (``--durations``, 2 cores), in that order: run first."""
 
 

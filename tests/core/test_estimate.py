@@ -29,7 +29,9 @@ def test_stiff_events_stay_stable(plant, estimate_jit, event):
 def test_no_excitation_is_flagged(plant, estimate_jit):
     sc = jd.Scenario(duration_s=60.0, ambient_load_std=0.0, ambient_freq_std_hz=0.0,
                      ambient_volt_std=0.0, tve_percent=0.0, freq_noise_hz=0.0)
-    est = estimate_jit(jd.simulate(plant, sc).recording, plant, jd.ObserverConfig())
+    sim = jd.simulate(plant, sc)
+    # with a2 known, as the stiff-event runs above (one compiled shape for both)
+    est = estimate_jit(sim.recording, plant, jd.ObserverConfig(), jd.Settings(), None, sim.truth.a2)
     assert _finite(est)
     assert not bool(est.excited) and not bool(est.converged)
     assert np.isnan(float(est.convergence_time_s))
