@@ -1,7 +1,9 @@
+import json
 import os
 import shutil
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -103,19 +105,28 @@ def test_fleet_strict_exits_3_unless_every_unit_is_identified(tmp_path, capsys, 
 def test_compilation_cache_folder(tmp_path):
     """`jaxdse` keeps compiled code in $JAXDSE_CACHE_DIR, else $XDG_CACHE_HOME/jaxdse/xla;
     JAXDSE_CACHE_DIR=off turns the cache off."""
-    script = ("import jax\nfrom jaxdse._app.cli import compilation_cache\n"
-              "print(compilation_cache())\n")
-    env = {k: v for k, v in os.environ.items() if k not in ("JAXDSE_CACHE_DIR", "XDG_CACHE_HOME")}
-
-    def folder(**extra):
-        res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
-                             env=env | extra, check=True)
-        return res.stdout.strip().splitlines()[-1]
-
-    assert folder(JAXDSE_CACHE_DIR=str(tmp_path / "c")) == str(tmp_path / "c")
+    # One interpreter for the three settings (each start imports JAX): the cache folder is
+    # reset between them, as a fresh process has none.
+    script = textwrap.dedent("""
+        import json, os, sys
+        import jax
+        from jaxdse._app.cli import compilation_cache
+        for extra in json.loads(sys.argv[1]):
+            for k in ("JAXDSE_CACHE_DIR", "XDG_CACHE_HOME"):
+                os.environ.pop(k, None)
+            os.environ.update(extra)
+            jax.config.update("jax_compilation_cache_dir", None)
+            print(compilation_cache())
+    """)
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("JAXDSE_CACHE_DIR", "XDG_CACHE_HOME", "JAX_COMPILATION_CACHE_DIR")}
+    cases = [{"JAXDSE_CACHE_DIR": str(tmp_path / "c")}, {"XDG_CACHE_HOME": str(tmp_path / "x")},
+             {"JAXDSE_CACHE_DIR": "off"}]
+    res = subprocess.run([sys.executable, "-c", script, json.dumps(cases)], capture_output=True, text=True,
+                         env=env, check=True)
+    expected = [str(tmp_path / "c"), str(tmp_path / "x" / "jaxdse" / "xla"), "None"]
+    assert res.stdout.strip().splitlines()[-3:] == expected
     assert (tmp_path / "c").is_dir()
-    assert folder(XDG_CACHE_HOME=str(tmp_path / "x")) == str(tmp_path / "x" / "jaxdse" / "xla")
-    assert folder(JAXDSE_CACHE_DIR="off") == "None"
 
 
 def test_assessment_holds_no_host_callback(cut25, plant):
