@@ -120,7 +120,7 @@ def cut25(pmu25):
 @pytest.fixture(scope="session")
 def assess_jit():
     """``jd.assess`` of one unit with the test settings (``jaxdse run``'s: trajectories kept,
-    4 bootstrap draws), compiled once: the runner's, the vmap guard's and the verdict tests'
+    4 bootstrap draws), compiled once: the runner test's and the verdict tests'
     unit-alone runs share it (on ``cut25``'s shape)."""
     from builders import TEST_BOOTSTRAP_DRAWS
 
