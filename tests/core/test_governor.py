@@ -494,19 +494,21 @@ def test_invalid_parameters():
 
 # --- transformations --------------------------------------------------------------------------
 
+def _loss(g):
+    """Tm after 50 explicit steps from the steady state, as a function of the parameters."""
+    tr = g.reference_from_steady(T_M0, 0.0)
+    x = g.steady_state(tr, 0.0)
+    x = jax.lax.fori_loop(0, 50, lambda _, x: x + 0.01 * g.vector_field(x, -0.002, tr), x)
+    return g.torque(x, -0.002)
+
+
+_jit_value_and_grad = jax.jit(jax.value_and_grad(_loss))
+"""Compiled once per model structure (the parameters are traced leaves)."""
+
+
 @pytest.mark.parametrize("cls,name,kw", ALL, ids=IDS)
 def test_jit_and_grad(cls, name, kw):
-    gov = cls(**kw)
-
-    @jax.jit
-    def loss(g):
-        tr = g.reference_from_steady(T_M0, 0.0)
-        x = g.steady_state(tr, 0.0)
-        x = jax.lax.fori_loop(0, 50, lambda _, x: x + 0.01 * g.vector_field(x, -0.002, tr), x)
-        return g.torque(x, -0.002)
-
-    value = loss(gov)
-    grads = jax.grad(loss)(gov)
+    value, grads = _jit_value_and_grad(cls(**kw))
     leaves = jtu.tree_leaves(eqx.filter(grads, eqx.is_inexact_array))
     assert np.isfinite(float(value))
     assert all(np.all(np.isfinite(np.asarray(v))) for v in leaves)
