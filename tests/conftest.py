@@ -41,6 +41,9 @@ jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
 if not os.environ.get("JAXDSE_TEST_OPTIMIZE"):
     jax.config.update("jax_disable_most_optimizations", True)
+    # XLA's MLIR fusion emitters cost half of a compile at optimisation level 0 (read at the
+    # backend's start, so set before the first computation; subprocesses inherit it).
+    os.environ["XLA_FLAGS"] = " ".join((os.environ.get("XLA_FLAGS", ""), "--xla_cpu_use_fusion_emitters=false")).strip()
 if os.environ.get("JAX_COMPILATION_CACHE_DIR"):
     jax.config.update("jax_compilation_cache_dir", os.environ["JAX_COMPILATION_CACHE_DIR"])
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.5)
