@@ -124,6 +124,18 @@ def block() -> str:
                        "per unit, compile included): " + "; ".join(
                            f"{k} unit(s) {v['wall_s']:.1f} s ({v['per_unit_s']:.3f} s per unit)"
                            for k, v in fs.items()) + ".\n\n  ![fleet scaling](benchmarks/fleet_scaling.png)")
+    co = load("benchmarks/compile_options.json")
+    if co:
+        parts = [f"{k.split('x')[0]} units x {k.split('x')[1]} samples: compile "
+                 f"{r['jaxdse']['compile_s']:.1f} s against {r['xla_defaults']['compile_s']:.1f} s, "
+                 f"run {r['jaxdse']['run_s']:.2f} s against "
+                 f"{r['xla_defaults']['run_s']:.2f} s" for k, r in co["sizes"].items()]
+        worst = max(r["h_max_abs_difference_s"] for r in co["sizes"].values())
+        out.append("- **Compile options** (`benchmarks/compile_options.py`, `jd.assess_units`, a fresh "
+                   "process each; compile = first call minus second, tracing included): the pipeline "
+                   "compiled with "
+                   "jaxdse's XLA options (LLVM level 1, XLA's classic emitters) against XLA's defaults: "
+                   + "; ".join(parts) + f"; H agrees within {worst:.0e} s.")
     read = load("benchmarks/read_24h.json")
     if read:
         out.append(f"- **Reading** a 24 h, 50 frames/s CSV (`benchmarks/read_24h.py`): "

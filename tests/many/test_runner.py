@@ -31,3 +31,23 @@ def test_runner_groups_pads_cuts_and_shifts(pmu25, cut25, plant, assess_jit):
     np.testing.assert_allclose(out[1].identified.h_ci95, alone.identified.h_ci95, rtol=1e-6)
     assert int(out[1].verdict.code) == int(alone.verdict.code)
     assert out[1].identified.h_s != out[2].identified.h_s  # its own plant, not its neighbour's
+
+
+def test_compiler_options_follow_the_optimisation_setting():
+    """On CPU the pipeline compiles with ``COMPILER_OPTIONS`` (benchmarks/compile_options.py),
+    except under ``jax_disable_most_optimizations`` (the suite's setting) or with ``{}``
+    (XLA's defaults); ``jaxdse run``'s optimised ISO-NE session run is the end-to-end check."""
+    import jax
+
+    from jaxdse._many import runner
+
+    before = jax.config.read("jax_disable_most_optimizations")
+    try:
+        jax.config.update("jax_disable_most_optimizations", True)
+        assert runner._compiled_chunk(None) is runner._assess_chunk
+        jax.config.update("jax_disable_most_optimizations", False)
+        chunk = runner._compiled_chunk(None)
+        assert chunk is not runner._assess_chunk and chunk is runner._compiled_chunk(None)
+        assert runner._compiled_chunk({}) is runner._assess_chunk
+    finally:
+        jax.config.update("jax_disable_most_optimizations", before)

@@ -86,17 +86,40 @@ def planned_calls(units: Sequence[Unit], identify_settings: IdentifySettings | N
     return total
 
 
-@eqx.filter_jit
-def _assess_chunk(recs, plants, refs, config, settings, identify_settings, verdict_settings):
+COMPILER_OPTIONS = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
+"""XLA options of the pipeline's compile on CPU: LLVM at level 1 and XLA's classic emitters
+instead of its MLIR fusion emitters compile it ~5 s faster than XLA's defaults and run it as
+fast (``benchmarks/compile_options.py``). Not applied under ``jax_disable_most_optimizations``."""
+
+
+def _assess_vmapped(recs, plants, refs, config, settings, identify_settings, verdict_settings):
     return jax.vmap(lambda r, p, a: assess(r, p, config, settings, identify_settings, verdict_settings, a))(
         recs, plants, refs)
+
+
+_assess_chunk = eqx.filter_jit(_assess_vmapped)
+_JITTED: dict = {}
+
+
+def _compiled_chunk(options: dict | None):
+    """The jitted vmapped ``assess`` compiled with these XLA options; None: ``COMPILER_OPTIONS``
+    on CPU, XLA's defaults under ``jax_disable_most_optimizations`` or on other backends."""
+    if options is None:
+        xla_defaults = jax.config.read("jax_disable_most_optimizations") or jax.default_backend() != "cpu"
+        options = {} if xla_defaults else COMPILER_OPTIONS
+    key = tuple(sorted(options.items()))
+    if not key:
+        return _assess_chunk
+    if key not in _JITTED:
+        _JITTED[key] = eqx.filter_jit(_assess_vmapped, compiler_options=dict(key))
+    return _JITTED[key]
 
 
 def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(),
                  settings: Settings = Settings(),
                  identify_settings: IdentifySettings | None = IdentifySettings(),
                  verdict_settings: VerdictSettings = VerdictSettings(), *, size: int | None = None,
-                 chunk: int | None = None,
+                 chunk: int | None = None, compiler_options: dict | None = None,
                  progress: Callable[[str], None] | None = None) -> list[Assessment]:
     """:func:`jaxdse.assess` every unit, vmapped within groups; one :class:`Assessment` per
     unit, in order, with host (NumPy) arrays cut to the unit's length and time-shifted.
@@ -107,8 +130,11 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
             (``identify_settings=None``: the online estimate and its playback only).
         size: pad every recording to this many samples (default: per-group buckets).
         chunk: units per compiled call (default: what ``CHUNK_BYTES`` holds).
+        compiler_options: XLA options of the compile (default: ``COMPILER_OPTIONS`` on CPU;
+            ``{}``: XLA's defaults).
         progress: called with a line after each compiled call.
     """
+    run = _compiled_chunk(compiler_options)
     out: list = [None] * len(units)
     for (length, _, _), members in group_units(units, size).items():
         recs = stack([pad_recording(units[k].recording, length, with_frequency=True) for k in members])
@@ -120,7 +146,7 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
             # A short last chunk repeats its last member: one compiled shape per group.
             idx = np.minimum(np.arange(start, start + step), len(members) - 1)
             part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in (recs, plants, refs))
-            res = _assess_chunk(*part, config, settings, identify_settings, verdict_settings)
+            res = run(*part, config, settings, identify_settings, verdict_settings)
             res = jax.device_get(res)
             for j in range(min(step, len(members) - start)):
                 u = units[members[start + j]]
