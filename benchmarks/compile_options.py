@@ -2,8 +2,9 @@
 
     python benchmarks/compile_options.py
 
-For each variant (``jaxdse``: ``jaxdse._many.runner.COMPILER_OPTIONS``, what ``jaxdse run``,
-``fleet`` and ``demo`` use on CPU; ``xla_defaults``: ``compiler_options={}``) and each size
+For each variant (``jaxdse``: ``compiler_options=None``, the runner's own options, LLVM at
+level 1 and XLA's classic emitters, what ``jaxdse run``, ``fleet`` and ``demo`` use on CPU;
+``xla_defaults``: ``compiler_options={}``) and each size
 (units x samples of simulated recordings at 25 frames/s), a fresh process times the first
 call of ``jd.assess_units`` (compile and run) and a second call (run only), and keeps the
 identified H of every unit (the variants must agree to round-off).
@@ -23,14 +24,15 @@ from pathlib import Path
 HERE = Path(__file__).parent
 SIZES = ((2, 15000), (8, 15000))
 """(units, samples): two 600 s recordings (as the demo's, at 25 frames/s) and four times as many."""
-VARIANTS = {"jaxdse": "None", "xla_defaults": "{}"}
+VARIANTS = {"jaxdse": "null", "xla_defaults": "{}"}
+"""The ``compiler_options`` argument of each variant, as JSON."""
 
 CHILD = """
 import json, sys, time
 import jax
 jax.config.update("jax_enable_x64", True)
 import jaxdse as jd
-options, units, samples = eval(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
+options, units, samples = json.loads(sys.argv[1]), int(sys.argv[2]), int(sys.argv[3])
 plant = jd.Plant()
 work = [jd.Unit(f"u{k}", jd.simulate(plant, jd.Scenario(duration_s=(samples - 1) / 25.0, frame_rate_hz=25.0,
         seed=k)).recording, plant) for k in range(units)]
@@ -53,10 +55,7 @@ def measure(options: str, units: int, samples: int) -> dict:
 
 
 def main() -> None:
-    from jaxdse._many.runner import COMPILER_OPTIONS
-
-    res: dict = {"machine": f"{platform.machine()}, {os.cpu_count()} cores",
-                 "compiler_options": COMPILER_OPTIONS, "sizes": {}}
+    res: dict = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "sizes": {}}
     for units, samples in SIZES:
         row = {name: measure(options, units, samples) for name, options in VARIANTS.items()}
         row["h_max_abs_difference_s"] = max(abs(a - b) for a, b in zip(*(row[v]["h_s"] for v in VARIANTS)))

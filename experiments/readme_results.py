@@ -133,8 +133,8 @@ def block() -> str:
         worst = max(r["h_max_abs_difference_s"] for r in co["sizes"].values())
         out.append("- **Compile options** (`benchmarks/compile_options.py`, `jd.assess_units`, a fresh "
                    "process each; compile = first call minus second, tracing included): the pipeline "
-                   "compiled with "
-                   "jaxdse's XLA options (LLVM level 1, XLA's classic emitters) against XLA's defaults: "
+                   "compiled with jaxdse's XLA options (LLVM level 1, XLA's classic emitters) against "
+                   "XLA's defaults: "
                    + "; ".join(parts) + f"; H agrees within {worst:.0e} s.")
     read = load("benchmarks/read_24h.json")
     if read:

@@ -88,8 +88,8 @@ def planned_calls(units: Sequence[Unit], identify_settings: IdentifySettings | N
 
 COMPILER_OPTIONS = {"xla_backend_optimization_level": 1, "xla_cpu_use_fusion_emitters": False}
 """XLA options of the pipeline's compile on CPU: LLVM at level 1 and XLA's classic emitters
-instead of its MLIR fusion emitters compile it ~5 s faster than XLA's defaults and run it as
-fast (``benchmarks/compile_options.py``). Not applied under ``jax_disable_most_optimizations``."""
+instead of its MLIR fusion emitters compile it faster than XLA's defaults and run it as fast
+(``benchmarks/compile_options.py``). Not applied under ``jax_disable_most_optimizations``."""
 
 
 def _assess_vmapped(recs, plants, refs, config, settings, identify_settings, verdict_settings):
