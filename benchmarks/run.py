@@ -52,6 +52,8 @@ try:  # benchmark extras: pip install -e .[bench]
 except ImportError:  # pragma: no cover
     ParamsNLGSSM = None
 
+OTHER_SCRIPTS = ("fleet_scaling", "dyr_playback")
+"""Keys of results.json that other benchmark scripts write (kept as they are)."""
 FAST = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
 IDENTIFY_CHUNK = 128
 """Recordings per call of the batch identification (bounds the bootstrap's memory)."""
@@ -428,9 +430,9 @@ def main() -> None:
     elif not args.quick:
         measure_memory(res)
 
-    if not args.quick and (HERE / "results.json").exists():  # benchmarks/fleet_scaling.py's own figures
+    if not args.quick and (HERE / "results.json").exists():  # fleet_scaling.py's and dyr_playback.py's own
         old = json.loads((HERE / "results.json").read_text())
-        res.update({k: v for k, v in old.items() if k.startswith("fleet_scaling")})
+        res.update({k: v for k, v in old.items() if k.startswith(OTHER_SCRIPTS)})
     (HERE / ("results_quick.json" if args.quick else "results.json")).write_text(json.dumps(res, indent=2))
     write_table(res, HERE / ("results_quick.md" if args.quick else "results.md"))
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.identify import _huber, _regression, refit_spread
+from jaxdse._core.identify import _huber, _regression, refit_spread, weighted_normal_equations
 from jaxdse._core.lti import hold_discretisation, lag_chain
 from jaxdse._core.verdict import _BIT, REASONS, VerdictSettings, verdict
 
@@ -39,6 +39,23 @@ def test_regression_recovers_known_parameters():
     for iterations in (0, 10):  # least squares and Huber
         theta, *_ = _huber(design, z, valid, iterations, 1.345)
         np.testing.assert_allclose(theta, [A1, A2, C, G], rtol=2e-4, atol=2e-5)
+
+
+def test_fused_normal_equations_equal_the_filtered_design():
+    """The bootstrap's fused loop (filters and sums in one pass, draws innermost) gives the
+    normal equations of ``_regression``'s design matrix, draw by draw, to round-off."""
+    signals, dt = swing_signals()
+    disc = hold_discretisation(*lag_chain(jnp.array([3.0, 4.0, 5.0])), dt)
+    rng = np.random.default_rng(3)
+    n = signals.shape[1]
+    draws = signals[None] * (1.0 + 0.01 * rng.normal(size=(3, 5, 1))) + 1e-3 * rng.normal(size=(3, 5, n))
+    w = jnp.asarray(rng.uniform(size=n))
+    a, r = weighted_normal_equations(draws, disc, w)
+    assert a.shape == (3, 4, 4) and r.shape == (3, 4)
+    for k in range(3):
+        x, z = _regression(draws[k], disc)
+        np.testing.assert_allclose(a[k], x.T @ (x * w[:, None]), rtol=1e-11, atol=1e-14)
+        np.testing.assert_allclose(r[k], x.T @ (w * z), rtol=1e-11, atol=1e-14)
 
 
 def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):

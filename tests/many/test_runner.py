@@ -7,6 +7,8 @@ Shapes shared with the rest of the suite (conftest): the units alone are ``asses
 samples, two units, as its split-recording test).
 """
 
+import os
+
 import numpy as np
 from builders import TEST_BOOTSTRAP_DRAWS
 
@@ -51,3 +53,30 @@ def test_compiler_options_follow_the_optimisation_setting():
         assert runner._compiled_chunk({}) is runner._assess_chunk
     finally:
         jax.config.update("jax_disable_most_optimizations", before)
+
+
+def test_chunks_on_the_thread_pool_equal_the_units_alone(cut25, plant, assess_jit):
+    """Three units in chunks of two: the first chunk compiles in the calling thread, the
+    second runs on the pool (two CPU cores); every unit equals itself assessed alone, in order."""
+    from jaxdse._many import runner
+
+    other = jd.Plant(governor=jd.TGOV1(r_pu=0.05))
+    ids = jd.IdentifySettings(bootstrap_draws=TEST_BOOTSTRAP_DRAWS)
+    plants = [plant, other, jd.Plant(governor=jd.TGOV1(r_pu=0.045))]
+    units = [jd.Unit(f"u{k}", cut25, p) for k, p in enumerate(plants)]
+    out = jd.assess_units(units, jd.ObserverConfig(), jd.Settings(), ids, chunk=2)
+    for u, a in zip(units, out):
+        alone = assess_jit(cut25, u.plant)
+        np.testing.assert_allclose(a.identified.h_s, alone.identified.h_s, rtol=1e-7)
+    assert runner.workers(2) == min(2, os.cpu_count())
+
+
+def test_a_thread_local_jax_context_keeps_every_chunk_in_the_calling_thread():
+    """``with jax.default_device(...)`` holds in its own thread only: the pool is not used."""
+    import jax
+
+    from jaxdse._many import runner
+
+    assert runner._same_context_in_threads()
+    with jax.default_device(jax.devices()[0]):
+        assert not runner._same_context_in_threads()

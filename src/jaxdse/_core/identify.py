@@ -254,17 +254,17 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
         spread, spread_fits = jnp.zeros((), ts.dtype), jnp.zeros((), jnp.int32)
     levels = noise_levels(recording, fe.valid)
     if s.noise_interval == "bootstrap":
-        def draw(key):  # the weighted fit (the fit's Huber weights) on the recording with more noise
+        def draw(key):  # the regression's inputs from the recording with more noise
             # Each sample's noise from its own index: a padded recording gets the same draws.
             e = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(key, k), (5,), dtype=ts.dtype))(
                 jnp.arange(ts.shape[0])).T
             noisy = add_noise(recording, levels, e)
-            x, zk = _regression(_signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing,
-                                         dt)[0], filters[1.0])
-            return solve_spd(x.T @ (x * weights[:, None]), x.T @ (weights * zk))
+            return _signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing, dt)[0]
 
         keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
-        cov = jnp.cov(jax.vmap(draw)(keys), rowvar=False)
+        # Each draw's weighted fit (the fit's Huber weights), from its own normal equations.
+        normal_k, rhs_k = weighted_normal_equations(jax.vmap(draw)(keys), filters[1.0], weights)
+        cov = jnp.cov(jax.vmap(solve_spd)(normal_k, rhs_k), rowvar=False)
     ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, spread_fits, levels,
                  jnp.array(False), s.model_error, t_ref, t_m0, a2_without)
     if not s.output_error:
@@ -322,6 +322,42 @@ def _regression(signals, discretisation):
     # (exact), not the smoothed ones of the front end, which attenuate a 1.5 Hz swing by ~9 %.
     fx2, fsx2 = bus[:, 0] + rotor[:, 1], bus[:, 1] + rotor[:, 2]
     return jnp.stack([-fx2, torque[:, 0], one[:, 0], gov[:, 0]], axis=1), fsx2
+
+
+def weighted_normal_equations(signals, discretisation, weights):
+    """The weighted normal equations (X^T W X [D, 4, 4], X^T W z [D, 4]) of the regression of
+    :func:`_regression` for ``D`` sets of its inputs (``signals``: [D, 5, T]) at once.
+
+    The same filtering and products as ``_regression`` followed by ``X.T @ (X * w)``, fused
+    into one loop over the samples that carries the filters' states and the sums: no filtered
+    state is stored (the bootstrap's draws would otherwise write and read 15 filtered states
+    per sample and draw), and the draws are the innermost axis of every operation.
+    """
+    phi, g0, g1 = discretisation
+    n = phi.shape[0]
+    u = jnp.moveaxis(signals, 0, -1)  # [5, T, D]
+    x0 = [u[:, 0]] + [jnp.zeros_like(u[:, 0])] * (n - 1)  # filter state j: [5 signals, D]
+
+    def add(sums, x, w):
+        a, r = sums
+        # bus, rotor, torque, one, gov = signals 0-4; as _regression: [-F x2, F dT, F 1, F gov], F s x2.
+        row = [-(x[0][0] + x[1][1]), x[0][2], x[0][3], x[0][4]]
+        z = x[1][0] + x[2][1]
+        return ([[a[i][j] + w * row[i] * row[j] for j in range(4)] for i in range(4)],
+                [r[i] + w * row[i] * z for i in range(4)])
+
+    def step(carry, v):
+        x, sums = carry
+        u0, u1, w = v
+        x = [sum(phi[i, j] * x[j] for j in range(n)) + g0[i] * u0 + g1[i] * u1 for i in range(n)]
+        return (x, add(sums, x, w)), None
+
+    zero = jnp.zeros(u.shape[-1], u.dtype)
+    sums = add(([[zero] * 4 for _ in range(4)], [zero] * 4), x0, weights[0])
+    (_, (a, r)), _ = jax.lax.scan(step, (x0, sums), (jnp.moveaxis(u[:, :-1], 1, 0),
+                                                    jnp.moveaxis(u[:, 1:], 1, 0), weights[1:]))
+    return (jnp.moveaxis(jnp.stack([jnp.stack(row) for row in a]), -1, 0),
+            jnp.moveaxis(jnp.stack(r), -1, 0))
 
 
 def _output_error(ts, fe: FrontEnd, t_ref, plant: Plant, settings: Settings, s: IdentifySettings,

@@ -3,20 +3,24 @@
 Units are grouped by what one compiled function can share: a padded length (a few sizes per
 octave), a PMU location and a plant structure. Each group is padded, stacked on the host,
 and run through ``jit(vmap(assess))`` in chunks of a bounded size (memory: the bootstrap
-holds ``bootstrap_draws`` front ends per unit); the results come back to the host once per
-chunk and are cut to each unit's own length and shifted to its own start time. ``jaxdse
-run``, ``jaxdse fleet`` and ``jaxdse demo`` all call :func:`assess_units`.
+holds ``bootstrap_draws`` front ends per unit), one chunk per CPU core at a time. The
+results come back to the host once per chunk and are cut to each unit's own length and
+shifted to its own start time. ``jaxdse run``, ``jaxdse fleet`` and ``jaxdse demo`` all
+call :func:`assess_units`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor, as_completed, wait
 
 import equinox as eqx
 import jax
 import jax.tree_util as jtu
 import numpy as np
+from jax._src import config as jax_config
 
 from .._core.assess import Assessment, assess
 from .._core.drem import ObserverConfig
@@ -30,8 +34,10 @@ from .batch import pad_recording, stack
 BUCKETS_PER_OCTAVE = 4
 """Recording lengths are padded up to one of 4 sizes per doubling (at most 19 % padding), so
 that the units of a run share a few compiled shapes."""
-CHUNK_BYTES = 1.5 * 2**30
-"""Working memory [B] that one chunk of a group may take; sets the units per compiled call."""
+RUN_BYTES = 3 * 2**30
+"""Working memory [B] that the chunks on the pool of :func:`workers` threads may take
+together; it sets the units per compiled call. (A group's first chunk, compiling in the
+calling thread, may run beside them.)"""
 BYTES_PER_SAMPLE = 8 * 80
 """Bytes per sample per front end held at once (~80 float64 arrays, measured on the bootstrap)."""
 
@@ -70,18 +76,31 @@ def group_units(units: Sequence[Unit], size: int | None = None) -> dict[tuple, l
     return groups
 
 
-def units_per_call(samples: int, identify_settings: IdentifySettings | None, units: int) -> int:
-    """Units per compiled call of a group: as many as ``CHUNK_BYTES`` holds, at most ``units``."""
+def workers(calls: int) -> int:
+    """Compiled calls run at once: one per CPU core on CPU (each call runs its scans on about
+    one core), one on other backends; at most ``calls``."""
+    if jax.default_backend() != "cpu":
+        return 1
+    return max(1, min(calls, os.cpu_count() or 1))
+
+
+def units_per_call(samples: int, identify_settings: IdentifySettings | None, units: int,
+                   side_by_side: int = 1) -> int:
+    """Units per compiled call of a group: as many as a share of ``RUN_BYTES`` holds, with
+    ``side_by_side`` calls running at once; at most ``units``."""
     fronts = 2 + (identify_settings.bootstrap_draws if identify_settings is not None else 0)
-    return int(max(1, min(units, CHUNK_BYTES // (samples * fronts * BYTES_PER_SAMPLE))))
+    budget = RUN_BYTES // max(side_by_side, 1)
+    return int(max(1, min(units, budget // (samples * fronts * BYTES_PER_SAMPLE))))
 
 
 def planned_calls(units: Sequence[Unit], identify_settings: IdentifySettings | None, size: int | None = None,
                   chunk: int | None = None) -> int:
     """How many compiled calls :func:`assess_units` makes (for a progress bar's length)."""
     total = 0
-    for (length, _, _), members in group_units(units, size).items():
-        step = chunk or units_per_call(length, identify_settings, len(members))
+    groups = group_units(units, size)
+    side_by_side = _pool_size(groups)
+    for (length, _, _), members in groups.items():
+        step = chunk or units_per_call(length, identify_settings, len(members), side_by_side)
         total += -(-len(members) // step)
     return total
 
@@ -124,37 +143,92 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
     """:func:`jaxdse.assess` every unit, vmapped within groups; one :class:`Assessment` per
     unit, in order, with host (NumPy) arrays cut to the unit's length and time-shifted.
 
+    The first chunk of each group compiles its function in the calling thread; the group's
+    other chunks then run side by side on a pool of threads (:func:`workers`), each taking
+    ``RUN_BYTES`` divided by the number of workers.
+
     Arguments:
         units: the units; each has its own recording and plant.
         config, settings, identify_settings, verdict_settings: shared by all units
             (``identify_settings=None``: the online estimate and its playback only).
         size: pad every recording to this many samples (default: per-group buckets).
-        chunk: units per compiled call (default: what ``CHUNK_BYTES`` holds).
+        chunk: units per compiled call (default: what a worker's share of ``RUN_BYTES`` holds).
         compiler_options: XLA options of the compile (default: ``COMPILER_OPTIONS`` on CPU;
             ``{}``: XLA's defaults).
         progress: called with a line after each compiled call.
     """
     run = _compiled_chunk(compiler_options)
     out: list = [None] * len(units)
-    for (length, _, _), members in group_units(units, size).items():
+    groups = group_units(units, size)
+    pool_size = _pool_size(groups)
+    plans = []  # per group: (length, members, stacked inputs, chunk starts, step)
+    for (length, _, _), members in groups.items():
         recs = stack([pad_recording(units[k].recording, length, with_frequency=True) for k in members])
         plants = stack([units[k].plant for k in members])
         refs = np.array([np.nan if units[k].a2_reference is None else units[k].a2_reference
                          for k in members])
-        step = chunk or units_per_call(length, identify_settings, len(members))
-        for start in range(0, len(members), step):
-            # A short last chunk repeats its last member: one compiled shape per group.
-            idx = np.minimum(np.arange(start, start + step), len(members) - 1)
-            part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in (recs, plants, refs))
-            res = run(*part, config, settings, identify_settings, verdict_settings)
-            res = jax.device_get(res)
-            for j in range(min(step, len(members) - start)):
-                u = units[members[start + j]]
-                out[members[start + j]] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
-                                                     int(np.shape(u.recording.t_s)[0]), u.t0_s)
-            if progress is not None:
-                progress(f"{min(start + step, len(members))}/{len(members)} unit(s) of {length} samples")
+        step = chunk or units_per_call(length, identify_settings, len(members), pool_size)
+        plans.append((length, members, (recs, plants, refs), list(range(0, len(members), step)), step))
+
+    def call(g: int, start: int):
+        length, members, inputs, _, step = plans[g]
+        # A short last chunk repeats its last member: one compiled shape per group.
+        idx = np.minimum(np.arange(start, start + step), len(members) - 1)
+        part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in inputs)
+        res = jax.device_get(run(*part, config, settings, identify_settings, verdict_settings))
+        for j in range(min(step, len(members) - start)):
+            u = units[members[start + j]]
+            out[members[start + j]] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
+                                                 int(np.shape(u.recording.t_s)[0]), u.t0_s)
+        return g, start
+
+    with ThreadPoolExecutor(pool_size) as pool:
+        pending: set = set()
+        for g, plan in enumerate(plans):
+            # The group's first chunk compiles, in the calling thread (its JAX contexts and
+            # logs apply); its other chunks then run side by side on the pool, while the
+            # calling thread goes on to the next group.
+            done = [call(g, plan[3][0])]
+            if pool_size > 1:
+                pending |= {pool.submit(call, g, s) for s in plan[3][1:]}
+            else:
+                done += [call(g, s) for s in plan[3][1:]]
+            for g_s in done:
+                _report(progress, plans, *g_s)
+            finished, pending = wait(pending, timeout=0)
+            for f in finished:
+                _report(progress, plans, *f.result())
+        for f in as_completed(pending):
+            _report(progress, plans, *f.result())
     return out
+
+
+def _report(progress, plans, g: int, start: int) -> None:
+    if progress is not None:
+        length, members, _, _, step = plans[g]
+        progress(f"{min(start + step, len(members))}/{len(members)} unit(s) of {length} samples")
+
+
+def _pool_size(groups: dict) -> int:
+    """Threads of the pool for these groups (:func:`workers`; 1 under a thread-local context)."""
+    n = workers(max((len(m) for m in groups.values()), default=1))
+    return n if n == 1 or _same_context_in_threads() else 1
+
+
+def _trace_context():
+    return jax_config.trace_context()
+
+
+def _same_context_in_threads() -> bool:
+    """Whether a new thread sees the calling thread's JAX trace context (x64, default device,
+    ...). A context manager (``with jax.default_device(...)``) holds in its own thread only:
+    then every chunk runs in the calling thread."""
+    try:
+        here = _trace_context()
+        with ThreadPoolExecutor(1) as pool:
+            return pool.submit(_trace_context).result() == here
+    except AttributeError:  # a JAX without this (private) function: no threads
+        return False
 
 
 def _cut_shift(a: Assessment, n: int, t0: float) -> Assessment:
