@@ -76,12 +76,20 @@ def group_units(units: Sequence[Unit], size: int | None = None) -> dict[tuple, l
     return groups
 
 
+def cores() -> int:
+    """CPU cores this process may run on (its affinity: ``taskset`` narrows it)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # no affinity on this platform
+        return os.cpu_count() or 1
+
+
 def workers(calls: int) -> int:
     """Compiled calls run at once: one per CPU core on CPU (each call runs its scans on about
     one core), one on other backends; at most ``calls``."""
     if jax.default_backend() != "cpu":
         return 1
-    return max(1, min(calls, os.cpu_count() or 1))
+    return max(1, min(calls, cores()))
 
 
 def units_per_call(samples: int, identify_settings: IdentifySettings | None, units: int,
