@@ -317,11 +317,21 @@ def _regression(signals, discretisation):
     """(design matrix [T, 4], left-hand side z [T]) of the swing equation filtered by the
     3rd-order filter of ``discretisation`` (:func:`~jaxdse._core.lti.hold_discretisation` of
     its :func:`~jaxdse._core.lti.lag_chain`)."""
-    bus, rotor, torque, one, gov = jax.vmap(lambda u: filter_states(discretisation, u))(signals)
-    # x2 = 2 pi (f - f0) + d(delta - theta)/dt (Remark 2): the derivatives are the filter's own
-    # (exact), not the smoothed ones of the front end, which attenuate a 1.5 Hz swing by ~9 %.
-    fx2, fsx2 = bus[:, 0] + rotor[:, 1], bus[:, 1] + rotor[:, 2]
-    return jnp.stack([-fx2, torque[:, 0], one[:, 0], gov[:, 0]], axis=1), fsx2
+    states = jax.vmap(lambda u: filter_states(discretisation, u))(signals)  # [5, T, 3]
+    row, z = _design_row(lambda signal, order: states[signal][:, order])
+    return jnp.stack(row, axis=1), z
+
+
+def _design_row(state):
+    """The regressors [-F x2, F (Tm - Te), F 1, F (Tm - Tm(0))] and the left-hand side F s x2
+    from ``state(signal, order)``, the filtered ``signal`` (0-4: bus, rotor, torque, one, gov;
+    see :func:`_signals`) differentiated ``order`` times.
+
+    x2 = 2 pi (f - f0) + d(delta - theta)/dt (Remark 2): the derivatives are the filter's own
+    (exact), not the smoothed ones of the front end, which attenuate a 1.5 Hz swing by ~9 %.
+    """
+    fx2 = state(0, 0) + state(1, 1)
+    return [-fx2, state(2, 0), state(3, 0), state(4, 0)], state(0, 1) + state(1, 2)
 
 
 def weighted_normal_equations(signals, discretisation, weights):
@@ -340,9 +350,7 @@ def weighted_normal_equations(signals, discretisation, weights):
 
     def add(sums, x, w):
         a, r = sums
-        # bus, rotor, torque, one, gov = signals 0-4; as _regression: [-F x2, F dT, F 1, F gov], F s x2.
-        row = [-(x[0][0] + x[1][1]), x[0][2], x[0][3], x[0][4]]
-        z = x[1][0] + x[2][1]
+        row, z = _design_row(lambda signal, order: x[order][signal])
         return ([[a[i][j] + w * row[i] * row[j] for j in range(4)] for i in range(4)],
                 [r[i] + w * row[i] * z for i in range(4)])
 

@@ -43,6 +43,17 @@ BYTES_PER_SAMPLE = 8 * 80
 
 
 @dataclasses.dataclass(frozen=True)
+class _Plan:
+    """One group of units: its padded length, its members (indices into the units), their
+    stacked inputs (recordings, plants, a2 references) and the units per compiled call."""
+
+    length: int
+    members: list[int]
+    inputs: tuple
+    step: int
+
+
+@dataclasses.dataclass(frozen=True)
 class Unit:
     """One unit of work: a recording (segment) of one generator and its plant."""
 
@@ -169,52 +180,47 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
     out: list = [None] * len(units)
     groups = group_units(units, size)
     pool_size = _pool_size(groups)
-    plans = []  # per group: (length, members, stacked inputs, chunk starts, step)
+    plans = []
     for (length, _, _), members in groups.items():
         recs = stack([pad_recording(units[k].recording, length, with_frequency=True) for k in members])
         plants = stack([units[k].plant for k in members])
         refs = np.array([np.nan if units[k].a2_reference is None else units[k].a2_reference
                          for k in members])
         step = chunk or units_per_call(length, identify_settings, len(members), pool_size)
-        plans.append((length, members, (recs, plants, refs), list(range(0, len(members), step)), step))
+        plans.append(_Plan(length, members, (recs, plants, refs), step))
 
-    def call(g: int, start: int):
-        length, members, inputs, _, step = plans[g]
+    def call(plan: _Plan, start: int) -> str:
         # A short last chunk repeats its last member: one compiled shape per group.
-        idx = np.minimum(np.arange(start, start + step), len(members) - 1)
-        part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in inputs)
+        idx = np.minimum(np.arange(start, start + plan.step), len(plan.members) - 1)
+        part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in plan.inputs)
         res = jax.device_get(run(*part, config, settings, identify_settings, verdict_settings))
-        for j in range(min(step, len(members) - start)):
-            u = units[members[start + j]]
-            out[members[start + j]] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
-                                                 int(np.shape(u.recording.t_s)[0]), u.t0_s)
-        return g, start
+        for j in range(min(plan.step, len(plan.members) - start)):
+            k = plan.members[start + j]
+            out[k] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
+                                int(np.shape(units[k].recording.t_s)[0]), units[k].t0_s)
+        return (f"{min(start + plan.step, len(plan.members))}/{len(plan.members)} unit(s) of "
+                f"{plan.length} samples")
 
+    report = progress or (lambda _: None)
     with ThreadPoolExecutor(pool_size) as pool:
         pending: set = set()
-        for g, plan in enumerate(plans):
+        for plan in plans:
             # The group's first chunk compiles, in the calling thread (its JAX contexts and
             # logs apply); its other chunks then run side by side on the pool, while the
             # calling thread goes on to the next group.
-            done = [call(g, plan[3][0])]
+            report(call(plan, 0))
+            rest = range(plan.step, len(plan.members), plan.step)
             if pool_size > 1:
-                pending |= {pool.submit(call, g, s) for s in plan[3][1:]}
+                pending |= {pool.submit(call, plan, start) for start in rest}
             else:
-                done += [call(g, s) for s in plan[3][1:]]
-            for g_s in done:
-                _report(progress, plans, *g_s)
+                for start in rest:
+                    report(call(plan, start))
             finished, pending = wait(pending, timeout=0)
             for f in finished:
-                _report(progress, plans, *f.result())
+                report(f.result())
         for f in as_completed(pending):
-            _report(progress, plans, *f.result())
+            report(f.result())
     return out
-
-
-def _report(progress, plans, g: int, start: int) -> None:
-    if progress is not None:
-        length, members, _, _, step = plans[g]
-        progress(f"{min(start + step, len(members))}/{len(members)} unit(s) of {length} samples")
 
 
 def _pool_size(groups: dict) -> int:
@@ -223,20 +229,16 @@ def _pool_size(groups: dict) -> int:
     return n if n == 1 or _same_context_in_threads() else 1
 
 
-def _trace_context():
-    return jax_config.trace_context()
-
-
 def _same_context_in_threads() -> bool:
     """Whether a new thread sees the calling thread's JAX trace context (x64, default device,
     ...). A context manager (``with jax.default_device(...)``) holds in its own thread only:
     then every chunk runs in the calling thread."""
-    try:
-        here = _trace_context()
-        with ThreadPoolExecutor(1) as pool:
-            return pool.submit(_trace_context).result() == here
-    except AttributeError:  # a JAX without this (private) function: no threads
+    context = getattr(jax_config, "trace_context", None)  # private: without it, no threads
+    if context is None:
         return False
+    here = context()
+    with ThreadPoolExecutor(1) as pool:
+        return pool.submit(context).result() == here
 
 
 def _cut_shift(a: Assessment, n: int, t0: float) -> Assessment:
