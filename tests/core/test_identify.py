@@ -7,9 +7,18 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.identify import _huber, _regression, refit_spread, weighted_normal_equations
+from jaxdse._core.front_end import front_end, reference_torque
+from jaxdse._core.identify import (
+    _huber,
+    _regression,
+    front_ends,
+    identify_front,
+    refit_spread,
+    weighted_normal_equations,
+)
 from jaxdse._core.lti import hold_discretisation, lag_chain
 from jaxdse._core.verdict import _BIT, REASONS, VerdictSettings, verdict
+from jaxdse._many.batch import pad_recording
 
 A1, A2, C, G = 0.8, 26.0, 0.05, -0.3
 
@@ -56,6 +65,30 @@ def test_fused_normal_equations_equal_the_filtered_design():
         x, z = _regression(draws[k], disc)
         np.testing.assert_allclose(a[k], x.T @ (x * w[:, None]), rtol=1e-11, atol=1e-14)
         np.testing.assert_allclose(r[k], x.T @ (w * z), rtol=1e-11, atol=1e-14)
+
+
+def test_front_ends_share_one_front_end_with_the_bootstrap_draws(plant, short):
+    """``front_ends`` runs the recording and its bootstrap draws through one vmapped front end:
+    the recording's is the plain front end, each draw differs from it by noise of the measured
+    levels, and a padded recording gets the same draws on its own samples."""
+    ids = jd.IdentifySettings(bootstrap_draws=3)
+    fe, draws = jax.jit(lambda r: front_ends(r, plant, jd.Settings(), ids))(short)
+    plain = front_end(short, plant)
+    np.testing.assert_allclose(fe.alg.delta_rad, plain.alg.delta_rad, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(fe.x2_meas, plain.x2_meas, rtol=1e-12, atol=1e-12)
+    assert draws.front_ends.alg.delta_rad.shape == (3, short.t_s.shape[0])
+    spread = np.std(np.asarray(draws.front_ends.alg.t_e_pu) - np.asarray(fe.alg.t_e_pu), axis=1)
+    assert np.all(spread > 0) and np.all(spread < 0.05)
+    n = short.t_s.shape[0]
+    _, padded = jax.jit(lambda r: front_ends(r, plant, jd.Settings(), ids))(pad_recording(short, n + 40))
+    np.testing.assert_allclose(padded.front_ends.alg.delta_rad[:, :n], draws.front_ends.alg.delta_rad,
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(padded.levels, draws.levels, rtol=1e-12)
+    # the main front end alone: the sandwich needs no draws, the bootstrap refuses to run without
+    assert front_ends(short, plant, jd.Settings(), jd.IdentifySettings(noise_interval="sandwich"))[1] is None
+    with pytest.raises(ValueError, match="draws"):
+        identify_front(short, plain, reference_torque(short.t_s, plain, plant.governor, jd.Settings()),
+                       plant, jd.ObserverConfig(), jd.Settings(), ids)
 
 
 def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):

@@ -409,5 +409,15 @@ def main(argv=None) -> int:
         return 1
 
 
+def entry() -> None:
+    """The ``jaxdse`` console script: :func:`main`, then exit without the interpreter's
+    teardown of the XLA client and its compiled code (~0.7 s after a fleet run), once the
+    outputs are written and the streams flushed."""
+    code = main()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

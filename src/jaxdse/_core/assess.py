@@ -13,8 +13,8 @@ import equinox as eqx
 
 from .drem import ObserverConfig
 from .estimate import Replay, estimate_front, replay_front
-from .front_end import front_end, reference_torque
-from .identify import Identified, IdentifySettings, identify_front
+from .front_end import reference_torque
+from .identify import Identified, IdentifySettings, front_ends, identify_front
 from .plant import Plant
 from .recording import Recording
 from .result import Estimate
@@ -46,14 +46,14 @@ def assess(recording: Recording, plant: Plant, config: ObserverConfig = Observer
     through; :func:`jaxdse.assess_batch` runs many units.
     """
     ts = recording.t_s
-    fe = front_end(recording, plant, settings)
+    fe, draws = front_ends(recording, plant, settings, identify_settings)
     t_ref = reference_torque(ts, fe, plant.governor, settings)
     if identify_settings is None:
         est = estimate_front(ts, fe, t_ref, plant, config, settings, None, a2_reference)
         return Assessment(est, None, None, online_verdict(est))
     online = estimate_front(ts, fe, t_ref, plant, config, dataclasses.replace(settings, playback=False),
                             None, a2_reference)
-    ident = identify_front(recording, fe, t_ref, plant, config, settings, identify_settings)
+    ident = identify_front(recording, fe, t_ref, plant, config, settings, identify_settings, draws)
     rep = replay_front(ts, fe, t_ref, ident.t_m0_pu, plant, ident.a1, ident.a2, settings,
                        ident.t_m_offset_pu, ident.governor_gain_error)
     return Assessment(online, ident, rep, verdict(online, ident, rep, verdict_settings))

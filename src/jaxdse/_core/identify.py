@@ -59,7 +59,7 @@ Taylor matrix exponentials), so that it vmaps over a fleet.
 from __future__ import annotations
 
 import dataclasses
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -208,16 +208,55 @@ def identify(recording: Recording, plant: Plant, config: ObserverConfig = Observ
     Returns:
         An :class:`Identified`. Pure: jit, vmap (fleets, noise draws) and grad pass through.
     """
-    fe = front_end(recording, plant, settings)
+    fe, draws = front_ends(recording, plant, settings, identify_settings)
     return identify_front(recording, fe, reference_torque(recording.t_s, fe, plant.governor, settings),
-                          plant, config, settings, identify_settings)
+                          plant, config, settings, identify_settings, draws)
+
+
+class Draws(NamedTuple):
+    """The parametric bootstrap's noise draws of a recording (:func:`front_ends`)."""
+
+    front_ends: FrontEnd
+    """The front ends of the draws (leading axis: the draw)."""
+    levels: Array
+    """The noise levels added (``Identified.noise_levels``)."""
+
+
+def front_ends(recording: Recording, plant: Plant, settings: Settings,
+               identify_settings: IdentifySettings | None) -> tuple[FrontEnd, Draws | None]:
+    """The recording's front end and, for the bootstrap, its noise draws (None without the
+    bootstrap), from one vmapped front end: one copy of it in the compiled graph, however
+    many draws."""
+    s = identify_settings
+    if s is None or s.noise_interval != "bootstrap":
+        return front_end(recording, plant, settings), None
+    ts = recording.t_s
+    n = ts.shape[0] if recording.n_samples is None else recording.n_samples
+    levels = noise_levels(recording, jnp.arange(ts.shape[0]) < n)
+
+    def noisy(key):  # the recording with white noise of its own levels added once more
+        # Each sample's noise from its own index: a padded recording gets the same draws.
+        e = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(key, k), (5,), dtype=ts.dtype))(
+            jnp.arange(ts.shape[0])).T
+        return add_noise(recording, levels, e)
+
+    keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
+    recordings = jax.tree_util.tree_map(lambda x, xs: jnp.concatenate([x[None], xs]),
+                                        recording, jax.vmap(noisy)(keys))
+    fes = jax.vmap(lambda r: front_end(r, plant, settings))(recordings)
+    return (jax.tree_util.tree_map(lambda x: x[0], fes),
+            Draws(jax.tree_util.tree_map(lambda x: x[1:], fes), levels))
 
 
 def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, config: ObserverConfig,
-                   settings: Settings, identify_settings: IdentifySettings) -> Identified:
-    """:func:`identify` on a front end computed once (``front_end``) and its T_ref [pu], which
-    the online estimate and the replay share."""
+                   settings: Settings, identify_settings: IdentifySettings,
+                   draws: Draws | None = None) -> Identified:
+    """:func:`identify` on a front end computed once and its T_ref [pu], which the online
+    estimate and the replay share; ``draws``: the bootstrap draws' front ends
+    (:func:`front_ends`; needed for ``noise_interval="bootstrap"``)."""
     s = identify_settings
+    if s.noise_interval == "bootstrap" and draws is None:
+        raise ValueError("identify_front: the bootstrap needs its draws' front ends (front_ends())")
     ts = recording.t_s
     dt = ts[1] - ts[0]
     valid = fe.valid & (ts >= ts[0] + s.settle_s)
@@ -225,7 +264,11 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
     poles = jnp.stack([config.lambda1, config.lambda2, config.lambda3])
     filters = {k: hold_discretisation(*lag_chain(k * poles), dt) for k in (1.0, *s.spread_scales)}
-    signals, t_m0 = _signals(fe, recording, plant, t_ref, smoothing, dt)
+    # The regression's inputs of the recording and of the bootstrap's draws, vmapped (one copy).
+    every = jax.tree_util.tree_map(lambda x, *xs: jnp.concatenate([jnp.asarray(x)[None], *xs]), fe,
+                                   *(() if draws is None else (draws.front_ends,)))
+    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt))(every)
+    signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
         design, z = _regression(sig, disc)
@@ -236,34 +279,25 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
         centred = z - jnp.sum(v * z) / jnp.maximum(jnp.sum(v), 1.0)
         return 1.0 - jnp.sum(v * resid**2) / jnp.maximum(jnp.sum(v * centred**2), 1e-300)
 
-    design, z, (theta, weights, slope, resid) = fit(filters[1.0], signals)
+    # The main fit and the filter spread's refits (each its own Huber weights: the same weights
+    # shift a2), vmapped over the filters: one copy of the fit in the compiled graph.
+    stacked = jax.tree_util.tree_map(lambda *x: jnp.stack(x), *filters.values())
+    designs, zs, (thetas, ws, slopes, resids) = jax.vmap(lambda d: fit(d, signals))(stacked)
+    design, z, theta, weights, slope, resid = designs[0], zs[0], thetas[0], ws[0], slopes[0], resids[0]
     # What H rests on: the same weighted fit with D fixed at 0, and with the governor correction
     # fixed at 0 (a column dropped: its row and column of the normal matrix become the identity).
     normal, rhs = design.T @ (design * weights[:, None]), design.T @ (weights * z)
     a2_without = jnp.stack([_fit_without(normal, rhs, j)[1] for j in (0, 3)])
     cov, info = _sandwich(design * (weights * resid)[:, None], (design * slope[:, None]).T @ design, window)
-    if s.spread_scales:  # each filter's own Huber fit (its own weights: the same weights shift a2)
-        def refit(d):
-            _, zk, (theta_k, _, _, resid_k) = fit(d, signals)
-            return theta_k[1], explained(zk, resid_k)
-
-        others, share = jax.vmap(refit)(
-            jax.tree_util.tree_map(lambda *x: jnp.stack(x), *(filters[k] for k in s.spread_scales)))
-        spread, spread_fits = refit_spread(theta[1], others, explained(z, resid), share)
+    if s.spread_scales:
+        share = jax.vmap(explained)(zs[1:], resids[1:])
+        spread, spread_fits = refit_spread(theta[1], thetas[1:, 1], explained(z, resid), share)
     else:
         spread, spread_fits = jnp.zeros((), ts.dtype), jnp.zeros((), jnp.int32)
-    levels = noise_levels(recording, fe.valid)
+    levels = noise_levels(recording, fe.valid) if draws is None else draws.levels
     if s.noise_interval == "bootstrap":
-        def draw(key):  # the regression's inputs from the recording with more noise
-            # Each sample's noise from its own index: a padded recording gets the same draws.
-            e = jax.vmap(lambda k: jax.random.normal(jax.random.fold_in(key, k), (5,), dtype=ts.dtype))(
-                jnp.arange(ts.shape[0])).T
-            noisy = add_noise(recording, levels, e)
-            return _signals(front_end(noisy, plant, settings), noisy, plant, t_ref, smoothing, dt)[0]
-
-        keys = jax.random.split(jax.random.PRNGKey(s.bootstrap_seed), s.bootstrap_draws)
         # Each draw's weighted fit (the fit's Huber weights), from its own normal equations.
-        normal_k, rhs_k = weighted_normal_equations(jax.vmap(draw)(keys), filters[1.0], weights)
+        normal_k, rhs_k = weighted_normal_equations(draw_signals, filters[1.0], weights)
         cov = jnp.cov(jax.vmap(solve_spd)(normal_k, rhs_k), rowvar=False)
     ee = _result(theta, cov, info, plant.machine.omega_s, jnp.sum(valid), spread, spread_fits, levels,
                  jnp.array(False), s.model_error, t_ref, t_m0, a2_without)
@@ -426,8 +460,8 @@ def noise_levels(recording: Recording, valid) -> Array:
                          jnp.nan)
 
     f = recording.f_hz if recording.f_hz is not None else jnp.full_like(recording.t_s, jnp.nan)
-    return jnp.stack([level(jnp.log(recording.v_mag_pu)), level(recording.v_ang_rad),
-                      level(jnp.log(recording.i_mag_pu)), level(recording.i_ang_rad), level(f)])
+    return jax.vmap(level)(jnp.stack([jnp.log(recording.v_mag_pu), recording.v_ang_rad,
+                                      jnp.log(recording.i_mag_pu), recording.i_ang_rad, f]))
 
 
 def add_noise(recording: Recording, levels, e) -> Recording:
@@ -491,11 +525,13 @@ def _huber(x, y, valid, iterations, k):
         u = jnp.abs(r) / (k * jnp.maximum(sigma, 1e-300))
         return jnp.where(u <= 1.0, 1.0, 1.0 / u), u <= 1.0
 
-    w, sigma = jnp.ones_like(y), jnp.ones((), y.dtype)
-    for _ in range(min(iterations, SCALE_UPDATES)):  # unrolled: a cond would run both under vmap
+    def update(w, _):  # a step that re-estimates the scale
         r = y - x @ solve(w)
         sigma = scale(r)
-        w = weights(r, sigma)[0]
+        return weights(r, sigma)[0], sigma
+
+    w, sigmas = jax.lax.scan(update, jnp.ones_like(y), None, length=min(iterations, SCALE_UPDATES))
+    sigma = sigmas[-1] if iterations else jnp.ones((), y.dtype)
     w, _ = jax.lax.scan(lambda w, _: (weights(y - x @ solve(w), sigma)[0], None), w, None,
                         length=max(iterations - SCALE_UPDATES, 0))
     theta = solve(w)

@@ -11,7 +11,9 @@ call :func:`assess_units`.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import gc
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor, as_completed, wait
@@ -208,7 +210,8 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
             # The group's first chunk compiles, in the calling thread (its JAX contexts and
             # logs apply); its other chunks then run side by side on the pool, while the
             # calling thread goes on to the next group.
-            report(call(plan, 0))
+            with _collector_paused():
+                report(call(plan, 0))
             rest = range(plan.step, len(plan.members), plan.step)
             if pool_size > 1:
                 pending |= {pool.submit(call, plan, start) for start in rest}
@@ -221,6 +224,20 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
         for f in as_completed(pending):
             report(f.result())
     return out
+
+
+@contextlib.contextmanager
+def _collector_paused():
+    """Python's cyclic garbage collector off while a group's function is traced: tracing
+    allocates ~0.3 M objects, and the collector's passes over them took ~0.5 s of a 3.3 s
+    trace (the objects are freed by reference counting either way)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
 
 
 def _pool_size(groups: dict) -> int:
