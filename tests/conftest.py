@@ -23,8 +23,8 @@
   MLIR fusion emitters, which took half of each compile at that level: the suite on 2 cores
   took 8.0 min instead of 12.5 min. The session run
   that computes more than it compiles, ``jaxdse run`` on the ISO-NE recording, runs with them
-  on (:func:`optimised`), as a user's does: 41 s against 70 s (``jaxdse demo``: 53 s against
-  51 s, so it stays without).
+  on (:func:`optimised`), as a user's does: its set-up took 21 s against 26 s without, alone
+  on 2 cores (``jaxdse demo``: 18 s either way, so it stays without; 2026-11-25).
 * Python's cyclic garbage collector runs less often (``gc.set_threshold`` below).
 * pytest-xdist, one worker per core (``-n auto --dist loadscope`` in pyproject.toml): each
   module, and the modules that share compiled shapes or session runs (``SHARED``,
