@@ -1,3 +1,7 @@
+"""The ``jaxdse`` command line: the demo's output contract, figures an engineer can read, the
+installed console script (help, exit status 2), command mix-ups, ``--strict``, the compile
+cache folder, and no host callback in the compiled assessment."""
+
 import json
 import os
 import shutil
