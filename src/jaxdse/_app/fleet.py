@@ -37,12 +37,6 @@ from .report import summary_entry
 from .run import module_values, settings_values, sha256
 from .windows import WindowCriteria, window_scores
 
-MAX_SUBSTEPS = 24
-"""Adaptive playback steps per sample before a playback counts as diverged. Under vmap every
-member waits for the slowest, and a diverging playback would use the default 256 steps on
-every sample; the members that follow their data need a few."""
-
-
 # --- running ----------------------------------------------------------------------------------
 
 def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
@@ -79,8 +73,7 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         progress.step(f"read {p.name}")
     if not units:
         raise first_error
-    settings = dataclasses.replace(fleet.settings, keep="trajectories",
-                                   playback_integrator=_capped(fleet.settings.playback_integrator))
+    settings = dataclasses.replace(fleet.settings, keep="trajectories")
     # One padded length for the whole fleet (the longest recording's): one compilation.
     size = bucket(max(int(np.shape(u[1].t_s)[0]) for u in units))
     work = [Unit(p.name, rec, p.run.plant, t0) for p, rec, t0, _ in units]
@@ -109,11 +102,6 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
           f"{_fmt(s['median_abs_H_error_percent'])} %; verdicts {s['verdicts']}; wrote {out_dir}/"
           f"report.html, fleet.json, fleet.csv in {doc['wall_time_s']:.1f} s", file=stream)
     return doc
-
-
-def _capped(integ):
-    return dataclasses.replace(integ, max_substeps=min(integ.max_substeps, MAX_SUBSTEPS)) \
-        if integ.adaptive else integ
 
 
 def fleet(path, out_dir, stream=None) -> list[dict]:
