@@ -54,12 +54,13 @@ def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -
     if figures:
         plot_overview(units, out_dir / "overview.png")
         playback = PlaybackFigure()
+        try:
+            for e in units:
+                playback.draw(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
+        finally:
+            playback.close()
     for e in units:
-        if figures:
-            playback.draw(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
         (out_dir / "units" / f"{e['name']}.html").write_text(unit_page(e, doc, figures))
-    if figures:
-        playback.close()
     (out_dir / "report.html").write_text(fleet_page(doc, figures))
     (out_dir / "report.md").write_text(fleet_markdown(doc))
 

@@ -43,7 +43,7 @@ def assess(recording: Recording, plant: Plant, config: ObserverConfig = Observer
 
     With identification (``identify_settings`` not None) the online estimator's own playback
     is not run (the replay is the one shown). Pure: jit and vmap (fleets, noise draws) pass
-    through; :func:`jaxdse.assess_batch` runs many units.
+    through; :func:`jaxdse.assess_units` runs many units.
     """
     ts = recording.t_s
     fe, draws = front_ends(recording, plant, settings, identify_settings)
