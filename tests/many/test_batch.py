@@ -88,10 +88,15 @@ SCRIPT = textwrap.dedent("""
     print(json.dumps({"devices": len(jax.devices()), "a2": out.a2.tolist(), "a1": out.a1.tolist()}))
 """)
 CONFIGS = (400.0, 900.0, 1600.0, 2500.0, 5000.0)
+FLAGS = " ".join(f for f in os.environ.get("XLA_FLAGS", "").split() if "device_count" not in f)
+"""This process's XLA flags (conftest's), less any device count."""
 
 
 def _run(args, env_extra, n=1):
-    env = {**os.environ, "PYTHONPATH": str(Path(jd.__file__).parents[1]), **env_extra}
+    # XLA's slow passes off, as in this process (conftest): the children compile, not compute.
+    quick = str(jax.config.read("jax_disable_most_optimizations"))
+    env = {**os.environ, "PYTHONPATH": str(Path(jd.__file__).parents[1]),
+           "JAX_DISABLE_MOST_OPTIMIZATIONS": quick, **env_extra}
     procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, *args, *([str(k)] if n > 1 else [])],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
              for k in range(n)]
@@ -110,9 +115,10 @@ def test_sharded_and_distributed_runs_equal_single_device(short, plant, tmp_path
     cfgs = [jd.ObserverConfig(gamma1=g, gamma2=g) for g in CONFIGS]
     single = jd.estimate_batch(short, plant, cfgs, jd.Settings.fast(keep="final", playback=False))
     assert len(jax.devices()) == 1
-    sharded = _run([str(tmp_path / "rec.npz")], {"XLA_FLAGS": "--xla_force_host_platform_device_count=2"})[0]
+    two = f"{FLAGS} --xla_force_host_platform_device_count=2"
+    sharded = _run([str(tmp_path / "rec.npz")], {"XLA_FLAGS": two})[0]
     port = str(20000 + os.getpid() % 20000)
-    dist = _run([str(tmp_path / "rec.npz"), port], {"XLA_FLAGS": ""}, n=2)
+    dist = _run([str(tmp_path / "rec.npz"), port], {"XLA_FLAGS": FLAGS}, n=2)
     assert sharded["devices"] == 2 and all(d["devices"] == 2 for d in dist)
     for other in (sharded, *dist):
         np.testing.assert_allclose(other["a2"], single.a2, rtol=1e-12)
