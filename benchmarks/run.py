@@ -52,7 +52,7 @@ try:  # benchmark extras: pip install -e .[bench]
 except ImportError:  # pragma: no cover
     ParamsNLGSSM = None
 
-OTHER_SCRIPTS = ("fleet_scaling", "dyr_playback")
+OTHER_SCRIPTS = ("fleet_scaling", "dyr_playback", "identify_cost")
 """Keys of results.json that other benchmark scripts write (kept as they are)."""
 FAST = jd.Settings(observer_integrator=jd.Integrator.fast(), keep="final", playback=False)
 IDENTIFY_CHUNK = 128
@@ -277,6 +277,63 @@ def gradient_cost(sims, plant, cfg, sizes):
             "grad_over_forward_reverse": table["4"]["bwd_over_forward"], "grad_by_recordings": table}
 
 
+def sharding():
+    """The batch axis split over every device."""
+    mesh = jax.sharding.Mesh(np.array(jax.devices()), ("batch",))
+    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
+
+
+def dynamax_entry(sims, plant, data, batch, joint):
+    """dynamax's UKF (state, or ``joint`` state and a1, a2) on ``batch`` tiled recordings
+    (``data``: their :func:`ukf_inputs`): speed and accuracy."""
+    m = plant.machine
+    n_t = sims[0].recording.t_s.shape[0]
+    dt = float(sims[0].recording.t_s[1] - sims[0].recording.t_s[0])
+    x2_true = np.stack([np.asarray(s.truth.x2_rad_s) for s in sims])
+    a1_true = np.array([float(s.truth.a1) for s in sims])
+    a2_true = np.array([float(s.truth.a2) for s in sims])
+    idx = np.arange(batch) % len(sims)
+    arrays = [np.stack([d[k] for d in data]) for k in range(3)] + [a1_true, a2_true]
+    put = [jax.device_put(x[idx], sharding()) for x in arrays]
+    fn = jax.jit(jax.vmap(lambda u, y, x0, a1, a2: dynamax_ukf(u, y, x0, m, dt, a1, a2, joint)))
+    first, best, out = timed(lambda: jax.block_until_ready(fn(*put)), repeat=1)
+    out = np.asarray(out)[: len(sims)]
+    entry = {"batch": batch, "gen_samples_per_s": batch * n_t / best, "compile_s": first - best,
+             "x2_rmse_rad_s_median": float(np.median(np.sqrt(np.mean(
+                 (out[:, n_t // 2:, 1] - x2_true[:, n_t // 2:]) ** 2, axis=1))))}
+    if joint:
+        entry["a2_error_percent_median_abs"] = float(np.median(np.abs(
+            100 * (out[:, -1, 4] - a2_true) / a2_true)))
+    return entry
+
+
+def identify_entry(sims, plant, batch, ids, interval=True):
+    """``jd.identify`` with ``ids`` on ``batch`` tiled recordings, vmapped in calls of
+    ``IDENTIFY_CHUNK`` and sharded over the devices: speed and the median a2 error. The output is
+    a2 and, with ``interval``, the 95 % interval of H, so that XLA cannot drop the interval's
+    work (the bootstrap, the filter spread) as dead code."""
+    recs, _ = tile(sims, batch)
+    n_t = sims[0].recording.t_s.shape[0]
+    a2_true = np.array([float(s.truth.a2) for s in sims])
+
+    def out_of(r):
+        i = jd.identify(r, plant, jd.ObserverConfig(), jd.Settings(), ids)
+        return (i.a2, i.h_ci95) if interval else (i.a2,)
+
+    one = jax.jit(jax.vmap(out_of))
+    chunks = [jax.device_put(jax.tree_util.tree_map(lambda x, k=k: x[k:k + IDENTIFY_CHUNK], recs), sharding())
+              for k in range(0, batch, IDENTIFY_CHUNK)]
+
+    def fn():
+        parts = [jax.device_get(one(c)) for c in chunks]
+        return jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
+
+    first, best, out = timed(fn, repeat=1)
+    return {"batch": batch, "gen_samples_per_s": batch * n_t / best, "compile_s": first - best,
+            "a2_error_percent_median_abs": float(np.median(np.abs(
+                100 * (np.asarray(out[0])[: len(sims)] - a2_true) / a2_true)))}
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="small sizes (a smoke test, not the table)")
@@ -353,23 +410,10 @@ def main() -> None:
     y_all = np.stack([d[1] for d in data])
     x0_all = np.stack([d[2] for d in data])
     a1_true = np.array([float(s.truth.a1) for s in sims])
-    mesh = jax.sharding.Mesh(np.array(jax.devices()), ("batch",))
-    shard = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("batch"))
     ukf_res = {}
     for joint in (False, True):
         name = "joint" if joint else "state"
-        fn = jax.jit(jax.vmap(lambda u, y, x0, a1, a2, joint=joint: dynamax_ukf(u, y, x0, m, dt, a1, a2, joint)))  # noqa: E501
-        b = 64 if args.quick else 1024
-        idx = np.arange(b) % len(sims)
-        put = [jax.device_put(x[idx], shard) for x in (u_all, y_all, x0_all, a1_true, a2_true)]
-        first, best, out = timed(lambda put=put, fn=fn: jax.block_until_ready(fn(*put)), repeat=1)
-        out = np.asarray(out)[: len(sims)]
-        entry = {"batch": b, "gen_samples_per_s": b * n_t / best, "compile_s": first - best,
-                 "x2_rmse_rad_s_median": float(np.median(np.sqrt(np.mean(
-                     (out[:, n_t // 2:, 1] - x2_true[:, n_t // 2:]) ** 2, axis=1))))}
-        if joint:
-            entry["a2_error_percent_median_abs"] = float(np.median(np.abs(100 * (out[:, -1, 4] - a2_true) / a2_true)))  # noqa: E501
-        ukf_res[f"dynamax_{name}"] = entry
+        ukf_res[f"dynamax_{name}"] = dynamax_entry(sims, plant, data, 64 if args.quick else 1024, joint)
         n_fp = min(n_t, 1000)
         t = time.perf_counter()
         fp = filterpy_ukf(u_all[0], y_all[0], x0_all[0], m, dt, a1_true[0], a2_true[0], joint, n=n_fp)
@@ -388,31 +432,14 @@ def main() -> None:
     # output is a2 AND the 95 % interval of H, so that XLA cannot drop the interval's work
     # (the bootstrap, the filter spread) as dead code.
     b = 64 if args.quick else 1024
-    recs, idx = tile(sims, b)
     ident = {}
     for name, ids in (("default", jd.IdentifySettings()),
                       ("sandwich", jd.IdentifySettings(noise_interval="sandwich", spread_scales=())),
                       ("point estimate", jd.IdentifySettings(noise_interval="sandwich", spread_scales=()))):
-        def out_of(r, ids=ids, name=name):
-            i = jd.identify(r, plant, cfg, jd.Settings(), ids)
-            return i.a2 if name == "point estimate" else (i.a2, i.h_ci95)
-
-        one = jax.jit(jax.vmap(out_of))  # vmapped over recordings, sharded over the devices
-        chunks = [jax.device_put(jax.tree_util.tree_map(lambda x, k=k: x[k:k + IDENTIFY_CHUNK], recs), shard)
-                  for k in range(0, b, IDENTIFY_CHUNK)]
-
-        def fn(one=one, chunks=chunks):
-            parts = [jax.device_get(one(c)) for c in chunks]
-            return jax.tree_util.tree_map(lambda *x: np.concatenate(x), *parts)
-
-        first, best, out = timed(fn, repeat=1)
-        a2_out = out if name == "point estimate" else out[0]
-        ident[name] = {"batch": b, "gen_samples_per_s": b * n_t / best, "compile_s": first - best,
-                       "a2_error_percent_median_abs": float(np.median(np.abs(
-                           100 * (np.asarray(a2_out)[: len(sims)] - a2_true) / a2_true))),
-                       "interval": {"default": f"bootstrap, {ids.bootstrap_draws} draws, filter spread",
-                                    "sandwich": "Newey-West sandwich, no filter spread",
-                                    "point estimate": "none (a2 only)"}[name]}
+        ident[name] = identify_entry(sims, plant, b, ids, interval=name != "point estimate")
+        ident[name]["interval"] = {"default": f"bootstrap, {ids.bootstrap_draws} draws, filter spread",
+                                   "sandwich": "Newey-West sandwich, no filter spread",
+                                   "point estimate": "none (a2 only)"}[name]
         print("identify", name, ident[name], flush=True)
     res["identify"] = ident
     res["identify_gen_samples_per_s"] = ident["default"]["gen_samples_per_s"]

@@ -111,6 +111,17 @@ def block() -> str:
                      f"error {v['a2_error_percent_median_abs']:.3f} %")
         out.append(line + f". Peak memory {tb['peak_rss_gib_1h_x1024']:.2f} GiB for 1 h x 1024 "
                    f"configurations, {tb['peak_rss_gib_24h_chunked']:.2f} GiB for a 24 h recording streamed.")
+        ic = tb.get("identify_cost")
+        if ic:
+            parts = "; ".join(f"{name} {r['us_per_gen_sample']:.2f} ({r['ratio_to_joint_ukf']:.2f}x)"
+                              for name, r in ic["variants"].items())
+            out.append(
+                "- **What the interval costs** (`benchmarks/identify_cost.py`, batch "
+                f"{ic['batch']}, dynamax's joint UKF {ic['dynamax_joint_gen_samples_per_s'] / 1e3:,.0f} k "
+                f"generator-samples/s in the same run), in microseconds per generator-sample: {parts}. "
+                f"One bootstrap draw costs {ic['bootstrap_us_per_draw_and_gen_sample']:.3f}; running at "
+                f"twice the joint UKF's speed leaves {ic['us_per_gen_sample_at_2x_joint_ukf']:.2f} for the "
+                "whole identification.")
         dp = tb.get("dyr_playback")
         if dp:
             out.append(f"- **.dyr playback cost** (`benchmarks/dyr_playback.py`): a 70 s event at 60 frames/s "
