@@ -210,11 +210,11 @@ on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``as
 
 LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py", "demo",
                  "tests/core/test_estimate.py", "tests/many/test_batch.py", "isone",
-                 "tests/core/test_governor.py", "tests/app/test_fleet.py", "tests/many/test_stream.py",
+                 "tests/models/test_governors.py", "tests/app/test_fleet.py", "tests/many/test_stream.py",
                  "tests/core/test_events.py", "tests/core/test_drem.py", "tests/app/test_compiles.py",
-                 "tests/dyr/test_playback.py", "tests/dyr/test_exciter.py", "tests/app/test_window_replay.py",
-                 "tests/dyr/test_stabiliser.py", "tests/io/test_properties.py", "tests/core/test_lti.py",
-                 "tests/dyr/test_machine.py")
+                 "tests/dyr/test_playback.py", "tests/models/test_exciters.py", "tests/app/test_window_replay.py",
+                 "tests/models/test_stabilisers.py", "tests/io/test_properties.py", "tests/core/test_lti.py",
+                 "tests/models/test_machines.py")
 """Work units that took longest (``--durations=0`` summed per unit, 2 cores), in that order:
 run first."""
 

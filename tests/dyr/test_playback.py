@@ -20,7 +20,6 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxdse._core.governor import IEEEG1, TGOV1
 from jaxdse._dyr.calibrate import (
     Events,
     ParameterSpec,
@@ -29,8 +28,6 @@ from jaxdse._dyr.calibrate import (
     voltage_noise,
     with_values,
 )
-from jaxdse._dyr.exciter import exciter_from_dyr
-from jaxdse._dyr.machine import GENCLS, GENROU, GENSAL
 from jaxdse._dyr.playback import (
     PlaybackSettings,
     TerminalSeries,
@@ -38,8 +35,11 @@ from jaxdse._dyr.playback import (
     play_back,
     voltage_steps,
 )
-from jaxdse._dyr.stabiliser import stabiliser_from_dyr
 from jaxdse._dyr.unit import DyrUnit, UnitInputs
+from jaxdse._models.exciters import exciter_from_dyr
+from jaxdse._models.governors import IEEEG1, TGOV1
+from jaxdse._models.machines import GENCLS, GENROU, GENSAL
+from jaxdse._models.stabilisers import stabiliser_from_dyr
 
 FPS = 60.0
 N_FRAMES = 601                       # 10 s

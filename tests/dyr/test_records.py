@@ -13,12 +13,12 @@ import numpy as np
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.governor import IEEEG1, TGOV1
-from jaxdse._dyr.exciter import ESST3A, IEEEX1, saturation_product
-from jaxdse._dyr.machine import GENROU
 from jaxdse._dyr.records import unit_model
-from jaxdse._dyr.stabiliser import IEEEST
 from jaxdse._dyr.unit import UnitInputs
+from jaxdse._models.exciters import ESST3A, IEEEX1, saturation_product
+from jaxdse._models.governors import IEEEG1, TGOV1
+from jaxdse._models.machines import GENROU
+from jaxdse._models.stabilisers import IEEEST
 
 RAW = """\
 0, 100.00, 33, 0, 1, 50.00     / PSS(R)E 33 RAW, jaxdse tests/dyr/test_records.py

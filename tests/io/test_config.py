@@ -11,10 +11,10 @@ from typing import Literal
 import pytest
 
 import jaxdse as jd
-from jaxdse._core.governor import GOVERNORS
 from jaxdse._io.config import parse_config
 from jaxdse._io.psse import GOVERNOR_FIELDS, GOVERNOR_PARAMETERS
 from jaxdse._io.schema import field_types, typed_value
+from jaxdse._models.governors import GOVERNORS
 
 ROOT = Path(__file__).resolve().parents[2]
 BASE = """

@@ -18,10 +18,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dyr.exciter import EXCITERS
 from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
 from .._dyr.records import UnitModel, unit_model
-from .._dyr.stabiliser import STABILISERS
+from .._models.exciters import EXCITERS
+from .._models.stabilisers import STABILISERS
 
 PLAYBACK_MODELS = ("surrogate", "dyr")
 SIMULATED_RECORDS = frozenset({*EXCITERS, *STABILISERS})

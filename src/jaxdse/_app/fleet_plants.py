@@ -23,7 +23,6 @@ from pathlib import Path
 import equinox as eqx
 import numpy as np
 
-from .._core.governor import GOVERNORS, WeightedGovernor
 from .._core.machine import Machine, QAxisCircuits
 from .._core.mapping import AuxiliarySystem, Transformer
 from .._core.plant import Plant
@@ -44,6 +43,7 @@ from .._io.psse import (
     transformer_kwargs,
     transient_data,
 )
+from .._models.governors import GOVERNORS, WeightedGovernor
 
 
 @dataclasses.dataclass(frozen=True)

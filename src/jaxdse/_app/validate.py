@@ -42,14 +42,14 @@ from .._dyr.calibrate import (
     rank,
     stack_events,
 )
-from .._dyr.exciter import _ATTRIBUTES as EXCITER_ATTRIBUTES
-from .._dyr.exciter import EXCITER_FIELDS
 from .._dyr.playback import PlaybackSettings, play_back
-from .._dyr.stabiliser import STABILISER_FIELDS
 from .._io.errors import InputError
 from .._io.measurement import condition
 from .._io.psse import GOVERNOR_FIELDS, GOVERNOR_PARAMETERS, MACHINE_FIELDS
 from .._io.readers import load_table
+from .._models.exciters import _ATTRIBUTES as EXCITER_ATTRIBUTES
+from .._models.exciters import EXCITER_FIELDS
+from .._models.stabilisers import STABILISER_FIELDS
 from .._version import __version__
 from .dyr_fleet import plant_model, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet

@@ -37,8 +37,8 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
+from .._models.governors import AbstractGovernor
 from .fields import as_float, check_positive
-from .governor import AbstractGovernor
 from .integrate import Integrator, Previous, integrate_sampled
 from .metrics import smape_terms
 

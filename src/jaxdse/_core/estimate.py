@@ -12,9 +12,9 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from .._models.governors import ScaledGovernor
 from .drem import DremInputs, ObserverConfig, run_observer
 from .front_end import FrontEnd, front_end, front_sums, playback_inputs, reference_torque
-from .governor import ScaledGovernor
 from .plant import Plant
 from .playback import Playback, playback
 from .recording import Recording

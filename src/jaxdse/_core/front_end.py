@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from .._models.governors import AbstractGovernor
 from .algebraic import AlgebraicStates, algebraic_observer
-from .governor import AbstractGovernor
 from .mapping import map_to_terminal
 from .plant import Plant
 from .playback import PlaybackInputs, estimate_field_voltage

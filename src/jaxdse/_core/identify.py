@@ -68,10 +68,10 @@ import numpy as np
 import optimistix as optx
 from jaxtyping import Array, Float
 
+from .._models.governors import AbstractGovernor
 from .drem import ObserverConfig
 from .estimate import scaled_governor
 from .front_end import FrontEnd, front_end, playback_inputs, reference_torque
-from .governor import AbstractGovernor
 from .lti import butterworth2, filter_states, hold_discretisation, lag_chain
 from .machine import damping_from_a, inertia_from_a2
 from .plant import Plant

@@ -18,8 +18,8 @@ from __future__ import annotations
 import equinox as eqx
 from jaxtyping import Array, Float
 
+from .._models.governors import TGOV1, AbstractGovernor
 from .fields import as_float, check_positive
-from .governor import TGOV1, AbstractGovernor
 from .machine import Machine
 from .mapping import AuxiliarySystem, Line, Transformer
 

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
-from .governor import AbstractGovernor
+from .._models.governors import AbstractGovernor
 from .integrate import Integrator, integrate_sampled
 from .machine import (
     Machine,

@@ -19,9 +19,9 @@ from .._io.psse import (
     governor_from_dyr,
     record_label,
 )
-from .exciter import EXCITERS, exciter_from_dyr
-from .machine import MACHINES, machine_from_dyr
-from .stabiliser import STABILISERS, stabiliser_from_dyr
+from .._models.exciters import EXCITERS, exciter_from_dyr
+from .._models.machines import MACHINES, machine_from_dyr
+from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .unit import DyrUnit
 
 PSSE_EXCITER_MODELS = frozenset({

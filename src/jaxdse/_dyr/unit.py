@@ -15,9 +15,9 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from .._core.governor import GGOV1, AbstractGovernor
-from .base import AbstractExciter, AbstractStabiliser, ExciterInputs, StabiliserInputs
-from .machine import AbstractMachine, Terminal
+from .._models.base import AbstractExciter, AbstractStabiliser, ExciterInputs, StabiliserInputs
+from .._models.governors import GGOV1, AbstractGovernor
+from .._models.machines import AbstractMachine, Terminal
 
 
 class UnitReferences(NamedTuple):

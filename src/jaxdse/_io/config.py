@@ -42,7 +42,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .._core.drem import ObserverConfig
-from .._core.governor import GOVERNORS
 from .._core.identify import IdentifySettings
 from .._core.machine import Machine
 from .._core.mapping import AuxiliarySystem, Line, Transformer
@@ -50,6 +49,7 @@ from .._core.plant import Plant
 from .._core.settings import Settings
 from .._core.tuning import AUTODIFF_MODES, TUNABLE, LossWeights
 from .._core.verdict import VerdictSettings
+from .._models.governors import GOVERNORS
 from .errors import InputError
 from .measurement import MeasurementSpec
 from .schema import (

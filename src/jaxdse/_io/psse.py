@@ -37,7 +37,7 @@ from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from .._core.governor import GOVERNORS, AbstractGovernor
+from .._models.governors import GOVERNORS, AbstractGovernor
 from .errors import InputError
 
 SUPPORTED_RAW_REVISIONS = (32, 33)

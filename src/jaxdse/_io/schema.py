@@ -21,11 +21,11 @@ import typing
 import zoneinfo
 from pathlib import Path
 
-from .._core.governor import GOVERNORS
 from .._core.identify import IdentifySettings
 from .._core.integrate import Integrator
 from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
+from .._models.governors import GOVERNORS
 from .errors import InputError
 from .measurement import CHOICE_KEYS, COLUMN_ROLES, UNIT_KEYS, MeasurementSpec, spec_value_error
 from .readers import CsvOptions

@@ -12,8 +12,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from jaxdse._dyr.base import StabiliserInputs
-from jaxdse._dyr.stabiliser import (
+from jaxdse._models.base import StabiliserInputs
+from jaxdse._models.stabilisers import (
     IEEEST,
     ST2CUT,
     STABILISER_FIELDS,

@@ -33,12 +33,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .blocks import blocked as _blocked
-from .blocks import lag as _lag
-from .blocks import lead_lag as _lead_lag
-from .blocks import safe as _safe
-from .blocks import washout as _washout
-from .fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
+from .._core.blocks import blocked as _blocked
+from .._core.blocks import lag as _lag
+from .._core.blocks import lead_lag as _lead_lag
+from .._core.blocks import safe as _safe
+from .._core.blocks import washout as _washout
+from .._core.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
 
 
 class AbstractGovernor(eqx.Module):

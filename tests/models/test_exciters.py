@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 import scipy.signal as sig
 
-from jaxdse._dyr.base import ExciterInputs
-from jaxdse._dyr.exciter import (
+from jaxdse._models.base import ExciterInputs
+from jaxdse._models.exciters import (
     ESDC2A,
     ESST3A,
     EXCITER_FIELDS,

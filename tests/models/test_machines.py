@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from scipy.optimize import fsolve
 
-from jaxdse._dyr.machine import (
+from jaxdse._models.machines import (
     GENCLS,
     GENROU,
     GENSAL,
