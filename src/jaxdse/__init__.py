@@ -16,6 +16,8 @@ from ._app.validate import parameter_specs as parameter_specs
 from ._app.validate import validate as validate
 from ._app.windows import WindowCriteria as WindowCriteria
 from ._app.windows import dominant_mode as dominant_mode
+from ._app.windows import nearest_mode as nearest_mode
+from ._app.windows import oscillatory_modes as oscillatory_modes
 from ._app.windows import window_scores as window_scores
 from ._core.assess import Assessment as Assessment
 from ._core.assess import assess as assess

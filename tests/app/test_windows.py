@@ -4,6 +4,7 @@ import dataclasses
 import json
 import math
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,6 +13,8 @@ from jaxdse._app.windows import (
     WindowCriteria,
     dominant_mode,
     event_start,
+    nearest_mode,
+    oscillatory_modes,
     window_scores,
     windows,
 )
@@ -91,6 +94,47 @@ def test_pencil_nan_without_an_oscillatory_mode():
               0.8 + 0.002 * rng.standard_normal(t.size)):
         assert all(math.isnan(v) for v in dominant_mode(t, y))
     assert all(math.isnan(v) for v in dominant_mode(t[:8], ring(t[:8], 1.2, 0.1, 0.06)))
+
+
+def test_dominant_mode_is_the_swing_not_the_recovery_after_a_step():
+    """A step whose slow recovery (0.3 Hz, 35 % damping) carries more energy than the 1.1 Hz
+    swing (5 %): the dominant electromechanical mode is the swing; the replay's counterpart is
+    its mode nearest to it, not its own most energetic one."""
+    t = np.arange(0, 10, DT)
+    rng = np.random.default_rng(5)
+    recovery = -0.02 * (1 - np.exp(-t / 1.2)) + ring(t, 0.3, 0.35, 0.03)
+    y = 0.85 + recovery + ring(t, 1.1, 0.05, 0.01) + 2e-4 * rng.standard_normal(t.size)
+    freqs = [m.frequency_hz for m in oscillatory_modes(t, y)]
+    assert any(abs(f - 0.3) < 0.05 for f in freqs)             # the recovery is found ...
+    mode = dominant_mode(t, y)                                  # ... and is not the dominant mode
+    assert mode.frequency_hz == pytest.approx(1.1, rel=0.02)
+    assert mode.damping_ratio == pytest.approx(0.05, rel=0.2)
+    replay = 0.85 + recovery + ring(t, 1.3, 0.04, 0.01) + ring(t, 0.6, 0.1, 0.03)
+    assert dominant_mode(t, replay).frequency_hz == pytest.approx(0.6, rel=0.02)
+    assert nearest_mode(t, replay, mode.frequency_hz).frequency_hz == pytest.approx(1.3, rel=0.02)
+    assert all(math.isnan(v) for v in nearest_mode(t, 0.85 - 0.02 * (1 - np.exp(-t / 1.2)), 1.1))
+
+
+@pytest.mark.skipif(not (ANDES_NPCC := Path(__file__).parents[2] / "experiments/andes_bench/data/npcc/line_trip.csv.gz").exists(),
+                    reason="ANDES bench data absent")
+def test_dominant_mode_of_b21_g1_is_its_swing():
+    """ANDES npcc line trip, B21_G1's measured P: the swing near 1.1 Hz that its FFT shows,
+    not the slow recovery at 0.3 Hz (34.5 % damping) that the old finder reported."""
+    import pandas as pd
+    d = pd.read_csv(ANDES_NPCC, usecols=["time_s", "B21_G1/VM", "B21_G1/VA", "B21_G1/IM", "B21_G1/IA"])
+    t = d["time_s"].to_numpy()
+    v = d["B21_G1/VM"].to_numpy() * np.exp(1j * np.radians(d["B21_G1/VA"].to_numpy()))
+    i = d["B21_G1/IM"].to_numpy() * np.exp(1j * np.radians(d["B21_G1/IA"].to_numpy()))
+    p = (v * np.conj(i)).real
+    onset = event_start(t, [p])
+    fit = (t >= onset + 0.2) & (t <= onset + 10.0)
+    spectrum = np.abs(np.fft.rfft((p[fit] - p[fit].mean()) * np.hanning(fit.sum())))
+    f = np.fft.rfftfreq(int(fit.sum()), t[1] - t[0])
+    peak = f[(f > 0.6)][np.argmax(spectrum[f > 0.6])]
+    mode = dominant_mode(t[fit], p[fit])
+    assert peak == pytest.approx(1.09, abs=0.1)
+    assert mode.frequency_hz == pytest.approx(peak, rel=0.2)
+    assert mode.damping_ratio < 0.2
 
 
 # ---- event_start and windows -------------------------------------------------------------------

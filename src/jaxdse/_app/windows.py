@@ -10,12 +10,13 @@ post-event) and, per window and channel, this module measures:
 * the peak deviation from the pre-event value (measured and simulated),
 * the RMS error in % of MBASE (never sMAPE: P, Q and speed deviations cross zero),
 * the RMS error after the best integer-sample time shift (a time-stamp offset shows here),
-* in the event window, the dominant oscillatory mode of both (matrix pencil method).
+* in the event window, the measurement's dominant electromechanical mode and the replay's
+  mode nearest to it in frequency (matrix pencil method).
 
 A replay that swings wider (peak deviation) or rings longer (lower damping ratio, larger
 post-event oscillation) than the recording fails, whatever its average error. Host-side
-NumPy only: ``event_start``, ``windows``, ``dominant_mode``, ``window_scores`` and the
-thresholds in ``WindowCriteria``.
+NumPy only: ``event_start``, ``windows``, ``oscillatory_modes`` (``dominant_mode``,
+``nearest_mode``), ``window_scores`` and the thresholds in ``WindowCriteria``.
 """
 
 from __future__ import annotations
@@ -198,9 +199,16 @@ class Mode(NamedTuple):
 NO_MODE = Mode(math.nan, math.nan, math.nan)
 
 
-def dominant_mode(t, y, detrend: str = "final", max_order: int = 20, max_samples: int = 600,
-                  min_energy_fraction: float = 0.05, fmin_hz: float = 0.05) -> Mode:
-    """The dominant oscillatory mode of a response, by the matrix pencil method.
+ELECTROMECHANICAL_BAND_HZ = (0.1, 3.0)
+"""Frequencies of electromechanical modes [Hz]: inter-area (0.1-0.8) and local (0.8-3)."""
+MAX_OSCILLATION_DAMPING = 0.3
+"""A pole pair damped above this ratio [-] is a decay, not an oscillation: it overshoots by under
+37 % and has decayed by e within half a period (e.g. the slow recovery after a step)."""
+
+
+def oscillatory_modes(t, y, detrend: str = "final", max_order: int = 20, max_samples: int = 600,
+                      min_energy_fraction: float = 0.05, fmin_hz: float = 0.05) -> list[Mode]:
+    """The oscillatory modes of a response, by the matrix pencil method, most energetic first.
 
     Method: Y. Hua and T. K. Sarkar, "Matrix pencil method for estimating parameters of
     exponentially damped/undamped sinusoids in noise", IEEE Trans. ASSP 38(5), 1990, in the
@@ -217,18 +225,18 @@ def dominant_mode(t, y, detrend: str = "final", max_order: int = 20, max_samples
        singular value), at most ``max_order``;
     4. poles z = eig(V2^H pinv(V1^H)) of the M leading right singular vectors (V1: last row
        dropped, V2: first row dropped); s = ln(z)/dt; residues by least squares;
-    5. dominant = the oscillatory pole (f >= max(fmin_hz, 1 / window length), below 0.45 of
-       the sampling rate) whose conjugate pair carries the most energy in the window, if that
-       is at least ``min_energy_fraction`` of the detrended signal's energy.
+    5. a mode is an oscillatory pole (f >= max(fmin_hz, 1 / window length), below 0.45 of the
+       sampling rate) whose conjugate pair carries at least ``min_energy_fraction`` of the
+       detrended signal's energy in the window.
 
-    t: time [s], uniform; y: response. Returns Mode(frequency [Hz], damping ratio -Re s/|s|
-    [-], amplitude [units of y]), or all NaN without an oscillatory mode (monotone response,
-    pure noise, fewer than 12 samples).
+    t: time [s], uniform; y: response. Returns [Mode(frequency [Hz], damping ratio -Re s/|s|
+    [-], amplitude [units of y])], empty without an oscillatory mode (monotone response, pure
+    noise, fewer than 12 samples).
     """
     t = np.asarray(t, dtype=float)
     y = np.asarray(y, dtype=float)
     if y.size < 12 or t.size != y.size or not np.all(np.isfinite(y)):
-        return NO_MODE
+        return []
     dt = float(np.median(np.diff(t)))
     tail = y[-max(1, y.size // 10):]
     y = y - (np.mean(tail) if detrend == "final" else np.mean(y))
@@ -239,18 +247,18 @@ def dominant_mode(t, y, detrend: str = "final", max_order: int = 20, max_samples
     h = dt * k
     n = y.size
     if n < 12:
-        return NO_MODE
+        return []
     L = n // 3
     Y = np.lib.stride_tricks.sliding_window_view(y, L + 1)          # (n-L) x (L+1) Hankel
     _, sv, Vh = np.linalg.svd(Y, full_matrices=False)
     if sv[0] <= 0:
-        return NO_MODE
+        return []
     beta = min(Y.shape) / max(Y.shape)
     omega = 0.56 * beta**3 - 0.95 * beta**2 + 1.82 * beta + 1.43
     order = int(np.sum(sv > max(1e-8 * sv[0], omega * np.median(sv))))
     order = min(order, max_order, L - 1)
     if order < 2:                                                  # a sinusoid needs two poles
-        return NO_MODE
+        return []
     V = Vh[:order]                                                 # M x (L+1)
     z = np.linalg.eigvals(V[:, 1:] @ np.linalg.pinv(V[:, :-1]))
     z = z[(np.abs(z) > 1e-12) & (n * np.log(np.abs(z) + 1e-300) < 700)].astype(complex)  # no overflow
@@ -258,17 +266,38 @@ def dominant_mode(t, y, detrend: str = "final", max_order: int = 20, max_samples
     R = np.linalg.lstsq(Z, y.astype(complex), rcond=None)[0]
     s = np.log(z) / h
     f = s.imag / (2 * np.pi)
-    osc = (f >= max(fmin_hz, 1.0 / duration)) & (f < 0.45 / h)
-    if not np.any(osc):
-        return NO_MODE
     energy = 2.0 * np.abs(R) ** 2 * np.sum(np.abs(Z) ** 2, axis=0)   # of the conjugate pair [y^2 x samples]
-    energy = np.where(osc, energy, -1.0)
-    i = int(np.argmax(energy))
-    if energy[i] < min_energy_fraction * float(np.sum(y * y)):
+    keep = (f >= max(fmin_hz, 1.0 / duration)) & (f < 0.45 / h) & (
+        energy >= min_energy_fraction * float(np.sum(y * y)))
+    out = []
+    for i in sorted(np.flatnonzero(keep), key=lambda i: -energy[i]):
+        gain = np.mean(np.exp(s[i] * dt * np.arange(k)))           # block-average gain (1 if k = 1)
+        out.append(Mode(float(f[i]), float(-s[i].real / abs(s[i])), float(2.0 * abs(R[i]) / abs(gain))))
+    return out
+
+
+def dominant_mode(t, y, band_hz: tuple[float, float] = ELECTROMECHANICAL_BAND_HZ,
+                  max_damping_ratio: float = MAX_OSCILLATION_DAMPING, **options) -> Mode:
+    """The dominant electromechanical mode of a response: of its :func:`oscillatory_modes` in
+    ``band_hz`` and damped at most ``max_damping_ratio``, the most energetic; ``NO_MODE`` if none.
+
+    A step response's slow recovery shows up as a heavily damped low-frequency pole pair that
+    may carry more energy than the swing itself; it is not the oscillation a planner compares.
+    """
+    for m in oscillatory_modes(t, y, **options):
+        if band_hz[0] <= m.frequency_hz <= band_hz[1] and m.damping_ratio <= max_damping_ratio:
+            return m
+    return NO_MODE
+
+
+def nearest_mode(t, y, frequency_hz: float, min_energy_fraction: float = 0.01, **options) -> Mode:
+    """Of the :func:`oscillatory_modes` of ``y`` (down to ``min_energy_fraction``: the
+    counterpart need not dominate the replay), the one nearest in frequency to
+    ``frequency_hz`` (the replay's counterpart of a measured mode); ``NO_MODE`` if none."""
+    modes = oscillatory_modes(t, y, min_energy_fraction=min_energy_fraction, **options)
+    if not modes or not math.isfinite(frequency_hz):
         return NO_MODE
-    gain = np.mean(np.exp(s[i] * dt * np.arange(k)))               # block-average gain (1 if k = 1)
-    zeta = float(-s[i].real / abs(s[i]))
-    return Mode(float(f[i]), zeta, float(2.0 * abs(R[i]) / abs(gain)))
+    return min(modes, key=lambda m: abs(m.frequency_hz - frequency_hz))
 
 
 # --------------------------------------------------------------------------------------------
@@ -395,8 +424,10 @@ def window_scores(t, measured: Mapping[str, Sequence[float]], simulated: Mapping
 
     Per window and channel (``ChannelScore``): peak deviation from the pre-event value
     (median of the pre-event window, each signal its own), RMS error, time-aligned RMS error
-    and shift, oscillation RMS about a straight line; in the event window the dominant modes
-    (``dominant_mode`` from ``mode_delay_s`` after the onset). Fails (reasons in words):
+    and shift, oscillation RMS about a straight line; in the event window, from ``mode_delay_s``
+    after the onset, the measurement's dominant electromechanical mode (``dominant_mode``) and
+    the replay's mode nearest to it in frequency (``nearest_mode``), so that the criteria
+    compare one mode (without a measured mode: the replay's dominant one). Fails (reasons in words):
 
     * event window: peak-deviation ratio sim/meas above ``max_peak_ratio`` or below
       ``min_peak_ratio`` (and the difference above ``min_deviation_percent_mbase``);
@@ -452,7 +483,8 @@ def window_scores(t, measured: Mapping[str, Sequence[float]], simulated: Mapping
             if name == "event":
                 fit = ts >= onset + c.mode_delay_s
                 mode_m = dominant_mode(ts[fit], ms[fit])
-                mode_s = dominant_mode(ts[fit], ss[fit])
+                mode_s = (nearest_mode(ts[fit], ss[fit], mode_m.frequency_hz)
+                          if math.isfinite(mode_m.frequency_hz) else dominant_mode(ts[fit], ss[fit]))
             sc = ChannelScore(k, name, int(ms.size), float(np.max(np.abs(m_avg[sl] - m0))),
                               float(np.max(np.abs(s_avg[sl] - s0))), _rms(ss - ms), aligned, shift * dt,
                               _oscillation(ts, ms), _oscillation(ts, ss), mode_m, mode_s)
