@@ -76,6 +76,9 @@ CASES = {
     "wecc": {"files": ("wecc/wecc.raw", "wecc/wecc_full.dyr"), "n_record": 10, "ou_sigma": 0.02,
              "seed": 179, "load_step_max_rise": 0.10},  # 25 %: 3 GW at buses 77-79, loss of synchronism
 }
+# Derived cases (a function each, below: npcc_exdc2, npcc_xd2_below_xl): the shipped case changed by
+# CASES[case]["dyr"] (its .dyr text) or CASES[case]["modify"] (before set-up); run with
+# --scenario line_trip load_step gen_trip.
 
 # Standard models with typical data, added only to GENROU units that the case leaves without one.
 ADDED_EXCITER = ("SEXS", {"TATB": 0.1, "TB": 10.0, "K": 100.0, "TE": 0.05, "EMIN": 0.0, "EMAX": 5.0})
@@ -95,6 +98,8 @@ DYR = {
                     "E1", "SE1", "E2", "SE2")),
     "ESDC2A": ((), ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF1", "Switch",
                     "E1", "SE1", "E2", "SE2")),
+    "EXDC2": ((), ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF1", "TF1", "Switch",
+                   "E1", "SE1", "E2", "SE2")),
     "EXST1": ((), ("TR", "VIMAX", "VIMIN", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KC", "KF", "TF")),
     "ESST3A": ((), ("TR", "VIMAX", "VIMIN", "KM", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KG", "KP",
                     "KI", "VBMAX", "KC", "XL", "VGMAX", "THETAP", "TM", "VMMAX", "VMMIN")),
@@ -113,6 +118,7 @@ MEANING = {
               "UO/UC as ANDES 2.0 simulates them: its data value times Sb/Tn",
     "IEEEX1": "PSS/E IEEEX1 (IEEE DC1A-like), limits and gains in pu",
     "ESDC2A": "PSS/E ESDC2A (IEEE DC2A)",
+    "EXDC2": "PSS/E EXDC2 (1981 IEEE DC2), parameters chosen as npcc_exdc2 states",
     "EXST1": "PSS/E EXST1 (IEEE ST1)",
     "ESST3A": "PSS/E ESST3A (IEEE ST3A)",
     "SEXS": "PSS/E SEXS simplified excitation system",
@@ -140,6 +146,8 @@ def _group_links(ss, group, key):
 def load_case(case, events=()):
     """Load a shipped ANDES case, add the missing standard controls and the given events; solve the PF."""
     files = [andes.get_case(f) for f in CASES[case]["files"]]
+    if "dyr" in CASES[case]:  # a derived case whose .dyr records are rewritten (npcc_exdc2)
+        files[1] = _derived_dyr(case, files[1])
     ss = andes.load(files[0], addfile=files[1] if len(files) > 1 else None, setup=False,
                     no_output=True, default_config=True)
     gov = _group_links(ss, "TurbineGov", "syn")
@@ -156,6 +164,8 @@ def load_case(case, events=()):
             ss.add(ADDED_EXCITER[0], {"syn": gidx, "idx": f"added_{ADDED_EXCITER[0]}_{gidx}",
                                       **ADDED_EXCITER[1]})
             added.append((gidx, ADDED_EXCITER[0]))
+    if "modify" in CASES[case]:  # a derived case (npcc_exdc2, npcc_xd2_below_xl)
+        CASES[case]["modify"](ss)
     for model, params in events:
         ss.add(model, params)
     ss.setup()
@@ -756,8 +766,8 @@ def verify_psse(case, ss, machines, raw, dyr, line_ev):
     d_v = float(np.max(np.abs(np.asarray(new.Bus.v.v) - np.asarray(ss.Bus.v.v))))
     d_a = float(np.max(np.abs(np.asarray(new.Bus.a.v) - np.asarray(ss.Bus.a.v))))
     worst_par = 0.0
-    for model in ("GENROU", "GENCLS", "TGOV1", "IEEEG1", "IEEEX1", "ESDC2A", "EXST1", "ESST3A", "SEXS",
-                  "IEEEST", "ST2CUT"):
+    for model in ("GENROU", "GENCLS", "TGOV1", "IEEEG1", "IEEEX1", "ESDC2A", "EXDC2", "EXST1", "ESST3A",
+                  "SEXS", "IEEEST", "ST2CUT"):
         a, b = ss.models.get(model), new.models.get(model)
         if a is None or a.n == 0:
             continue
@@ -826,6 +836,75 @@ def machine_id_any(ss, gen_idx):
 
 
 # ----------------------------------------------------------------------------------------------------
+# derived cases: the shipped npcc case changed (CASES[case]["dyr"] or ["modify"])
+# ----------------------------------------------------------------------------------------------------
+
+EXDC2_VR_LIMIT = 50.0  # npcc_exdc2: VRMAX = -VRMIN, never reached in these events (see npcc_exdc2)
+
+
+def _derived_dyr(case, path):
+    """The shipped .dyr rewritten by CASES[case]["dyr"], in a temporary file (the same text every run)."""
+    import tempfile
+    out = Path(tempfile.mkdtemp(prefix=f"andes_bench_{case}_")) / Path(path).name
+    out.write_text(CASES[case]["dyr"](Path(path).read_text()))
+    return str(out)
+
+
+def _derived_entry(case):
+    """truth.json's "derived_case": the function that derives the case and its docstring."""
+    f = CASES[case].get("dyr") or CASES[case].get("modify")
+    return {} if f is None else {"derived_case": {"function": f.__name__,
+                                                  "description": " ".join(f.__doc__.split())}}
+
+
+def npcc_exdc2(text):
+    """npcc with every IEEEX1 exciter record swapped to EXDC2 (the exciters the bench adds stay SEXS).
+
+    Parameter choices, so that ANDES 2.0's EXDC2 and the PSS/E EXDC2 (1981 IEEE DC2) are the same
+    system: TR, KA, TA, TB, TC, TE, KF, TF1 and the saturation points E1, SE(E1), E2, SE(E2) are the
+    IEEEX1 record's; KE as in the record where nonzero, else 1.0 (ANDES reads KE = 0 literally, PSS/E
+    computes it at initialisation; npcc has no KE = 0); VRMAX = -VRMIN = EXDC2_VR_LIMIT, wide enough
+    that no regulator limit is reached (PSS/E scales the EXDC2 limits by the terminal voltage, ANDES
+    2.0 does not). ANDES 2.0's EXDC2 outputs EFD = omega * (exciter voltage); the PSS/E EXDC2 has no
+    speed factor: at the speed deviations of these events (below 1e-3 pu) that is a relative EFD
+    difference below 0.1 %, left in (the playback's Q error shows what it costs). The records are
+    rewritten in the .dyr text (ANDES cannot take a device out of a case before set-up)."""
+    out = []
+    for rec in text.split("/"):
+        tok = rec.split()
+        if len(tok) >= 3 and tok[1].strip("'\"").upper() == "IEEEX1":
+            bus, mid = tok[0], tok[2]
+            c = dict(zip(("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF1", "TF1",
+                          "Switch", "E1", "SE1", "E2", "SE2"), (float(v) for v in tok[3:19])))
+            c["KE"] = c["KE"] if c["KE"] != 0 else 1.0
+            c["VRMAX"], c["VRMIN"] = EXDC2_VR_LIMIT, -EXDC2_VR_LIMIT
+            vals = [_g(v) for v in c.values()]
+            rec = (f"\n{bus} 'EXDC2' {mid} " + " ".join(vals[:6]) + "\n    " + " ".join(vals[6:12])
+                   + "\n    " + " ".join(vals[12:]) + " ")
+        out.append(rec)
+    return "/".join(out)
+
+
+XD2_OVER_XL = 0.5  # npcc_xd2_below_xl: X''d = X''q = XD2_OVER_XL * Xl on every GENROU
+
+
+def npcc_xd2_below_xl(ss):
+    """npcc with X''d (= X''q) below Xl on every GENROU: X''d = XD2_OVER_XL * Xl, all else as shipped.
+
+    Such records are common in shipped cases (ANDES's IEEE 39-bus case has 9 of its 10 GENROU so);
+    PSS/E warns about them and simulates them, and so does ANDES (its GENROU equations need only
+    X'd != Xl and X'q != Xl). The .raw ZSORCE X follows (it is X''d)."""
+    g = ss.GENROU
+    for i in range(g.n):
+        g.xd2.v[i] = XD2_OVER_XL * g.xl.v[i]
+        g.xq2.v[i] = XD2_OVER_XL * g.xl.v[i]
+
+
+CASES["npcc_exdc2"] = dict(CASES["npcc"], dyr=npcc_exdc2)
+CASES["npcc_xd2_below_xl"] = dict(CASES["npcc"], modify=npcc_xd2_below_xl)
+
+
+# ----------------------------------------------------------------------------------------------------
 # driver
 # ----------------------------------------------------------------------------------------------------
 
@@ -859,6 +938,7 @@ def run_case(case, scenarios, verify, step_check):
         "generator": "experiments/andes_bench/generate.py",
         "andes_version": andes.__version__,
         "case": case, "andes_case_files": list(CASES[case]["files"]),
+        **_derived_entry(case),
         "system_base_mva": sb, "f0_hz": f0,
         "integration": {"method": "ANDES implicit trapezoid, fixed step", "step_s_events": 1 / STEP_RATE,
                         "step_s_ambient": 1 / AMBIENT_STEP_RATE, "newton_tol": TDS_TOL},

@@ -38,7 +38,9 @@ import jaxdse as jd  # noqa: E402
 
 HERE = Path(__file__).parent
 DATA = HERE / "data"
-CASES = ("ieee14", "npcc", "wecc")
+CASES = ("ieee14", "npcc", "wecc", "npcc_exdc2", "npcc_xd2_below_xl")
+"""The bench's cases; npcc_exdc2 (exciters swapped to EXDC2) and npcc_xd2_below_xl (X''d below Xl
+on every GENROU) are npcc changed by generate.py (a function each there)."""
 EVENTS = ("line_trip", "load_step", "gen_trip")
 T_EVENT_S = 10.0
 EVENT_WINDOW_S = 10.0
@@ -92,6 +94,8 @@ def main():
     jobs = []
     for case in CASES:
         d = DATA / case
+        if not (d / "truth.json").exists():  # a derived case not generated yet
+            continue
         truth = json.loads((d / "truth.json").read_text())
         raw, dyr = jd.read_raw(d / f"{case}.raw"), jd.read_dyr(d / f"{case}.dyr")
         for ev in EVENTS:
@@ -151,10 +155,44 @@ def main():
         "angle_within_0.5_deg": int(sum(r["max_angle_err_deg"] <= TARGET_ANGLE for r in done)),
     }
     doc = {"settings": {"solver": settings.solver, "substeps": settings.substeps, "ke_zero": args.ke_zero},
-           "summary": summary, "timing": timing, "rows": rows}
+           "summary": summary, "by_exciter": by_model(done, 1), "by_case": by_case(done),
+           "timing": timing, "rows": rows}
     (HERE / "playback.json").write_text(json.dumps(doc, indent=1) + "\n")
     (HERE / "playback.md").write_text(report(doc))
     print(json.dumps(summary, indent=1))
+
+
+def _stats(rows) -> dict:
+    p = [r["rms_P_percent_mbase"] for r in rows]
+    q = [r["rms_Q_percent_mbase"] for r in rows]
+    return {"recordings": len(rows), "units": len({(r["case"], r["tag"]) for r in rows}),
+            "median_rms_P_percent_mbase": float(np.median(p)), "max_rms_P_percent_mbase": float(np.max(p)),
+            "median_rms_Q_percent_mbase": float(np.median(q)), "max_rms_Q_percent_mbase": float(np.max(q))}
+
+
+def by_model(rows, k) -> dict:
+    """RMS errors by the k-th model of the structure (1: the exciter), every case together."""
+    out = {}
+    for r in rows:
+        out.setdefault(r["structure"].split("/")[k], []).append(r)
+    return {m: _stats(v) for m, v in sorted(out.items())}
+
+
+def by_case(rows) -> dict:
+    out = {}
+    for r in rows:
+        out.setdefault(r["case"], []).append(r)
+    return {c: _stats(v) for c, v in out.items()}
+
+
+def _stats_table(title, stats) -> list[str]:
+    lines = [f"| {title} | units | recordings | RMS P median [%] | RMS P largest [%] | RMS Q median [%] | "
+             "RMS Q largest [%] |", "|---|---|---|---|---|---|---|"]
+    for k, v in stats.items():
+        lines.append(f"| {k} | {v['units']} | {v['recordings']} | {v['median_rms_P_percent_mbase']:.4f} | "
+                     f"{v['max_rms_P_percent_mbase']:.4f} | {v['median_rms_Q_percent_mbase']:.4f} | "
+                     f"{v['max_rms_Q_percent_mbase']:.4f} |")
+    return lines
 
 
 def report(doc) -> str:
@@ -182,6 +220,16 @@ def report(doc) -> str:
          < s['played_back'] else "(none over 10 %)"),
         f"- rotor angle within {TARGET_ANGLE} deg of the truth: {s['angle_within_0.5_deg']} of "
         f"{s['played_back']}",
+        "",
+        "Every exciter model compared the same way (P and Q RMS error over the 70 s, % of MBASE; "
+        "every case together):",
+        "",
+        *_stats_table("exciter", doc["by_exciter"]),
+        "",
+        "By case (npcc_exdc2: npcc with its exciters swapped to EXDC2; npcc_xd2_below_xl: npcc with "
+        "X''d = Xl/2 on every GENROU, records used as given; both made by generate.py):",
+        "",
+        *_stats_table("case", doc["by_case"]),
         "",
         "| case | event | unit | models (machine/exciter/PSS/governor) | RMS P [%] | RMS Q [%] | "
         "event peak err P [% of dev] | event peak err Q [% of dev] | max angle err [deg] |",

@@ -27,7 +27,7 @@ HERE = Path(__file__).parent
 
 
 def event_rms(u: dict, channel: str):
-    for sc in u["playback_windows"]["scores"]:
+    for sc in (u["validation"]["windows"] or {"scores": []})["scores"]:
         if sc["channel"] == channel and sc["window"] == "event":
             return sc["rms_error"]
     return None
@@ -36,7 +36,7 @@ def event_rms(u: dict, channel: str):
 def main():
     runs = {}
     with tempfile.TemporaryDirectory() as tmp:
-        for label, name in (("surrogate", "fleet.toml"), ("dyr", "fleet_dyr.toml")):
+        for label, name in (("surrogate", "fleet_surrogate.toml"), ("dyr", "fleet.toml")):
             runs[label] = {u["name"]: u for u in jd.fleet(HERE / name, Path(tmp) / label, stream=sys.stderr)}
     rows = []
     for name, s in runs["surrogate"].items():
@@ -47,9 +47,9 @@ def main():
                         for ch in ("P", "Q")},
                      "surrogate_rms_Q": s["playback_rms_percent_mbase"]["Q_t"],
                      "dyr_rms_Q": d["playback_rms_percent_mbase"]["Q_t"],
-                     "surrogate_passes_windows": s["criteria"]["event_windows"]["pass"],
-                     "dyr_passes_windows": d["criteria"]["event_windows"]["pass"],
-                     "dyr_window_reasons": d["criteria"]["event_windows"]["reasons"]})
+                     "surrogate_passes_windows": s["validation"]["result"] == "pass",
+                     "dyr_passes_windows": d["validation"]["result"] == "pass",
+                     "dyr_window_reasons": d["validation"]["reasons"]})
     on_dyr = [r for r in rows if r["model"] == "dyr"]
     summary = {
         "plants": len(rows), "on_dyr_model": len(on_dyr),

@@ -43,9 +43,9 @@ def _case(tmp: Path, dyr_text: str, events=("line_trip",), tags=("B1_G1", "B2_G1
 @pytest.fixture(scope="module")
 def fleet_run(tmp_path_factory):
     """One fleet run: B1_G1 with its own records, B2_G1 with its exciter renamed to a model
-    jaxdse does not simulate (ESAC1A, same constants)."""
+    jaxdse does not simulate (EXELI, same constants)."""
     tmp = tmp_path_factory.mktemp("dyr_fleet")
-    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'ESAC1A'")
+    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'")
     path = _case(tmp, text)
     assert main(["fleet", str(path), "--out", str(tmp / "out")]) == 0
     return tmp, json.loads((tmp / "out" / "fleet.json").read_text())
@@ -60,7 +60,7 @@ def test_fleet_dyr_playback_matches_andes(fleet_run):
     assert u["playback_rms_percent_mbase"]["P_t"] < 0.1
     assert u["playback_rms_percent_mbase"]["Q_t"] < 0.1
     assert u["surrogate_playback_rms_percent_mbase"]["Q_t"] > 3 * u["playback_rms_percent_mbase"]["Q_t"]
-    assert u["criteria"]["event_windows"]["pass"]
+    assert u["validation"]["result"] == "pass" and u["validation"]["model"] == "dyr"
     page = (tmp / "out" / "units" / "B1_G1.html").read_text()
     assert "own PSS/E records" in page and "ESST3A" in page
 
@@ -69,8 +69,11 @@ def test_fleet_dyr_falls_back_for_an_unsimulated_model(fleet_run):
     tmp, doc = fleet_run
     u = {e["name"]: e for e in doc["units"]}["B2_G1"]
     assert u["playback_model"] == "surrogate"
-    assert "ESAC1A" in u["playback_fallback"] and "not simulated" in u["playback_fallback"]
-    assert "ESAC1A" in (tmp / "out" / "units" / "B2_G1.html").read_text()
+    assert "EXELI" in u["playback_fallback"] and "not simulated" in u["playback_fallback"]
+    assert "EXELI" in (tmp / "out" / "units" / "B2_G1.html").read_text()
+    # the surrogate validates active power/frequency only, and says so
+    assert u["validation"]["model"] == "surrogate" and u["validation"]["channels"] == ["P_t", "x2"]
+    assert "reactive power/voltage is not validated" in u["validation"]["scope"]
 
 
 def test_validate_recovers_planted_h_and_round_trips(tmp_path):
@@ -80,7 +83,7 @@ def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     (as in ``fleet_run``, whose compiled shapes the round trip shares): it is skipped."""
     truth = json.loads((DATA / "truth.json").read_text())
     h_true = next(m["H_s_mbase"] for m in truth["machines"] if m["tag"] == "B1_G1")
-    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'ESAC1A'")
+    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'")
     first = text.index("1 'GENROU'")
     rec = text[first:text.index("/", first)]
     cons = rec.split()
@@ -90,7 +93,7 @@ def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     assert main(["validate", str(path), "--out", str(tmp_path / "val")]) == 0
     doc = json.loads((tmp_path / "val" / "validate.json").read_text())
     u = {e["name"]: e for e in doc["units"]}
-    assert "ESAC1A" in u["B2_G1"]["skipped"] and "parameters" not in u["B2_G1"]
+    assert "EXELI" in u["B2_G1"]["skipped"] and "parameters" not in u["B2_G1"]
     b1 = {p["parameter"]: p for p in u["B1_G1"]["parameters"]}
     assert b1["H"]["identifiable"]
     assert b1["H"]["calibrated_value"] == pytest.approx(h_true, rel=0.01)

@@ -12,6 +12,7 @@ import pytest
 
 import jaxdse as jd
 from jaxdse._app.cli import build_parser, main
+from jaxdse._app.dyr_fleet import PlaybackOptions
 from jaxdse._app.fleet import run_fleet
 from jaxdse._app.fleet_file import load_fleet
 
@@ -20,7 +21,7 @@ SHARED_DATA = ROOT.parent / "shared" / "data"
 BENCH = ROOT / "experiments" / "andes_bench"
 OSL = ROOT / "experiments" / "naspi_osl_case1" / "fleet.toml"
 UNIT_KEYS = {"name", "H_s", "H_ci95", "H_reference_s", "verdict", "reasons", "D", "interval",
-             "playback_smape_percent", "governor_models", "data_quality", "playback_windows", "criteria",
+             "playback_smape_percent", "governor_models", "data_quality", "validation",
              "playback_rms_percent_mbase", "playback_model", "parameters"}
 
 
@@ -44,10 +45,12 @@ def links(path: Path) -> list[str]:
 
 @pytest.fixture(scope="module")
 def ieee14(tmp_path_factory):
-    """The ANDES ieee14 line trip as a fleet, run once (8 bootstrap draws instead of 32: time)."""
+    """The ANDES ieee14 line trip as a fleet, run once (4 bootstrap draws instead of 32: time),
+    played back with the surrogate (the .dyr playback, the default: tests/app/test_dyr_playback.py)."""
     out = tmp_path_factory.mktemp("fleet")
     fl = load_fleet(BENCH / "fleet_ieee14.toml")
-    doc = run_fleet(dataclasses.replace(fl, identify=jd.IdentifySettings(bootstrap_draws=4)), out)
+    doc = run_fleet(dataclasses.replace(fl, identify=jd.IdentifySettings(bootstrap_draws=4),
+                                        playback=PlaybackOptions(model="surrogate")), out)
     return 0, out, json.loads((out / "fleet.json").read_text()) | {"returned": doc}
 
 
@@ -63,7 +66,9 @@ def test_fleet_json_and_report(ieee14):
         assert len(u["H_ci95"]) == 2 and u["H_ci95"][0] <= u["H_s"] <= u["H_ci95"][1]
         assert u["verdict"] in jd.VERDICTS and u["governor_models"] == ["TGOV1"]
         assert abs(u["H_error_percent"]) < 25.0
-        assert u["playback_model"] == "surrogate" and u["playback_windows"]["onset_s"] is not None
+        val = u["validation"]
+        assert u["playback_model"] == val["model"] == "surrogate" and val["windows"]["onset_s"] is not None
+        assert val["result"] in ("pass", "fail") and (val["result"] == "pass") == (not val["reasons"])
         assert all(v is not None and v >= 0 for v in u["playback_rms_percent_mbase"].values())
         assert set(u["parameters"]) == {"H", "D", "governor_correction"}
         assert u["parameters"]["H"]["verdict"] == u["verdict"]
@@ -84,6 +89,17 @@ def test_fleet_json_and_report(ieee14):
         page = out / "units" / f"{name}.html"
         assert f"{name}.png" in links(page) and (out / "units" / f"{name}.png").stat().st_size > 0
         assert "../report.html" in links(page)
+        # two verdicts, never merged: H's and the model validation's, and no sentence that
+        # claims an agreement the criteria deny
+        u = next(e for e in doc["units"] if e["name"] == name)
+        text = page.read_text()
+        assert "Inertia H: " in text and "Model validation: " in text
+        assert ("follows the recorded response" in text) == (u["validation"]["result"] == "pass")
+        assert "surrogate (P only)" in text and "reactive power/voltage is not validated" in text
+    head = (out / "report.html").read_text()
+    s = doc["summary"]
+    assert sum(s["validation"].values()) == len(names) and s["validation_models"] == {"surrogate": len(names)}
+    assert "Inertia H" in head and "Model validation" in head and "{'" not in head
 
 
 def test_missing_dyr_exits_2_with_one_line(tmp_path, capsys):
@@ -124,7 +140,7 @@ def test_criteria_and_identify_typed_from_fields(tmp_path):
                    "noise_interval = \"sandwich\"\nbootstrap_draws = 0\noutput_error = true\n"
                    "spread_scales = [0.5, 2.0]\n")
     fl = load_fleet(cfg)
-    assert fl.criteria["max_rms_percent_mbase_q"] == 7.0 and fl.criteria["max_interval_percent"] == 10.0
+    assert fl.criteria["max_rms_percent_mbase_q"] == 7.0 and fl.playback.model == "dyr"
     assert fl.identify.bootstrap_draws == 0 and fl.identify.output_error is True
     assert fl.identify.spread_scales == (0.5, 2.0)
     for extra, key, words in (("[criteria]\nmax_peak_ratio = \"7\"", "criteria.max_peak_ratio", "number"),

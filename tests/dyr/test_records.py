@@ -57,7 +57,7 @@ DYR = f"""\
     0.435 5.48 0.01 0.0098 3.86 3.33
     0.4 99 0 /
 {GENROU_1.replace("1 'GENROU' 1", "2 'GENROU' 1")}
-2 'ESAC1A' 1 0 400 0.02 0 0 14.5 -14.5 0.8 0.2 1 0.03 1 0.38 0.03 1 4.18 0.1 3.14 0.03 /
+2 'EXELI' 1 0 400 0.02 0 0 14.5 -14.5 0.8 0.2 1 0.03 1 0.38 0.03 1 4.18 0.1 3.14 0.03 /
 2 'TGOV1' 1 0.05 0.1 1.2 0 1 2.1
     0 /
 3 'GENROU' 1 6.5 0.06 0.2 0.05 5 0
@@ -86,7 +86,7 @@ def _line(start):
     return 1 + [k for k, t in enumerate(DYR.splitlines()) if t.startswith(start)][0]
 
 
-LINE_ESAC1A = _line("2 'ESAC1A'")
+LINE_EXELI = _line("2 'EXELI'")
 LINE_GENROU_3 = _line("3 'GENROU'")
 
 
@@ -101,7 +101,7 @@ def case(tmp_path_factory):
 def test_case_reads(case):
     dyr, raw = case
     assert raw.basfrq_hz == 50.0 and len(raw.generators) == 6
-    assert [r.model for r in dyr.records if r.line == LINE_ESAC1A] == ["ESAC1A"]
+    assert [r.model for r in dyr.records if r.line == LINE_EXELI] == ["EXELI"]
     assert [r.model for r in dyr.records if r.line == LINE_GENROU_3] == ["GENROU"]
 
 
@@ -139,10 +139,10 @@ def test_unsupported_exciter_model_leaves_the_unit_out(case):
     dyr, raw = case
     um = unit_model(dyr, raw, 2, "1")
     assert um.unit is None
-    assert um.models["exciter"] == "ESAC1A"
+    assert um.models["exciter"] == "EXELI"
     assert len(um.missing) == 1
     line = um.missing[0]
-    assert "ESAC1A" in line and f"line {LINE_ESAC1A}" in line and "not simulated" in line
+    assert "EXELI" in line and f"line {LINE_EXELI}" in line and "not simulated" in line
 
 
 def test_invalid_genrou_is_refused_naming_the_record(case):

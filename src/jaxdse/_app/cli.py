@@ -182,30 +182,33 @@ FLEET.toml (paths relative to it):
   [[unit]]       or an explicit list instead of [channels]: name, bus, ids = ["1", ...]
                  (default: every in-service unit of the bus), columns = {time, v_mag, v_ang,
                  i_mag, i_ang, frequency}, current_direction
-  [criteria]     pass/fail limits (the Transmission Planner's, NERC MOD-026-2):
-                 max_interval_percent (10: H's 95 % interval), and the playback by
-                 window (pre-event, event, post-event): max_peak_ratio (1.25),
+  [criteria]     the model validation's pass/fail limits (the Transmission Planner's,
+                 NERC MOD-026-2), the playback by window (pre-event, event,
+                 post-event): max_peak_ratio (1.25),
                  min_damping_ratio_fraction (0.75), max_rms_percent_mbase_p (2),
                  max_rms_percent_mbase_q (2), event_s (10), ... (see fleet.json)
   [observer] [settings] [identify]   as in `jaxdse run`;  [output] figures = true
-  [playback]     model = "surrogate" (3rd-order, identified H and D) | "dyr" (each unit's own
-                 PSS/E records: GENROU/GENSAL/GENCLS, SEXS/IEEEX1/EXDC2/ESDC2A/EXST1/ESST3A,
-                 IEEEST/ST2CUT, TGOV1/IEEEG1/GAST/HYGOV/GGOV1, the recorded terminal voltage
+  [playback]     model = "dyr" (default: each unit's own PSS/E records, machine, exciter,
+                 stabiliser and governor, as README lists them; the recorded terminal voltage
                  imposed as PSS/E PLBVFU1 does; a unit with another model plays back the
-                 surrogate and its page says which record); solver = "tsit5" | "kvaerno5";
+                 surrogate and its page says which record) | "surrogate" (3rd-order,
+                 identified H and D; validates P/frequency only); solver = "tsit5" | "kvaerno5";
                  substeps (4 per frame); ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
 
 DIR gets:
-  DIR/report.html            fleet page: units to look at first, overview figure of H with 95 %
-                             intervals against the .dyr H (coloured by verdict), sortable table
-  DIR/units/<name>.html      one page per unit: measured vs simulated x2, I_t, P_t, Q_t, the
-                             verdict and its reasons in words, H, D and their intervals, errors
-                             over the pre-event, event and post-event windows, pass/fail against
-                             [criteria], the plant's units, data quality, provenance (sha256)
+  DIR/report.html            fleet page: two results per unit, never merged: H's verdict and
+                             the model validation; units to look at first, overview figure of
+                             H with 95 % intervals against the .dyr H, sortable table
+  DIR/units/<name>.html      one page per unit: H's verdict and its reasons in words, H, D and
+                             their intervals; the model validation (pass/fail/not judged, the
+                             model played back) with measured vs simulated x2, I_t, P_t, Q_t
+                             and their residuals, errors and paired modes over the pre-event,
+                             event and post-event windows; the plant, data quality, provenance
   DIR/overview.png, DIR/units/<name>.png   the figures of these pages
   DIR/fleet.json             "units": name, H_s, H_ci95, H_reference_s, H_error_percent,
-                             verdict, reasons, D, interval parts, playback sMAPE, governor
-                             models, data quality, ...; "skipped": plants not estimated, why
+                             verdict, reasons (H's), D, interval parts, validation {result,
+                             model, scope, reasons, windows}, governor models, data quality,
+                             ...; "skipped": plants not estimated, why
   DIR/fleet.csv, DIR/report.md   the table
 
 Exit status: 0 on success; 2 on bad input (missing .raw/.dyr or recording, unknown key, no

@@ -32,10 +32,11 @@ SIMULATED_RECORDS = frozenset({*EXCITERS, *STABILISERS})
 class PlaybackOptions:
     """[playback]: which model plays the recording back, and how it is integrated."""
 
-    model: Literal["surrogate", "dyr"] = "surrogate"
-    """"surrogate" (the 3rd-order model with estimated Ef) or "dyr" (the unit's own PSS/E
-    records: machine, exciter, stabiliser, governor; the surrogate where a record's model is
-    not simulated)."""
+    model: Literal["surrogate", "dyr"] = "dyr"
+    """"dyr" (the unit's own PSS/E records: machine, exciter, stabiliser, governor; the
+    surrogate where a record's model is not simulated, named on the unit's page) or
+    "surrogate" (the 3rd-order model with the identified H, D and estimated Ef: validates
+    active power/frequency only)."""
     solver: Literal["tsit5", "kvaerno5"] = "tsit5"
     """"tsit5" (explicit, fixed step) or "kvaerno5" (implicit, adaptive) for the .dyr model."""
     substeps: int = 4

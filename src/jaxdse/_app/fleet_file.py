@@ -3,7 +3,7 @@ plant's channels are found ([channels] patterns or [[unit]] tables), validated o
 
 Sections: [case] raw*, dyr*; [measurement] (as ``jaxdse run``'s, location "terminal" or
 "hv"); [channels] or [[unit]]; [observer], [settings], [identify] (as ``jaxdse run``'s);
-[criteria] the pass/fail limits of fleet.json; [output] figures.
+[criteria] the model validation's pass/fail limits; [output] figures.
 
 A fleet never aborts for one unit: a plant whose case data are malformed, missing or
 implausible, or whose recording lacks one of its columns, is listed in ``Fleet.skipped`` with
@@ -50,16 +50,6 @@ TOP = {"case", "measurement", "channels", "unit", "observer", "settings", "ident
 
 
 @dataclasses.dataclass(frozen=True)
-class Criteria(WindowCriteria):
-    """[criteria]: the limits a unit must keep to pass (fleet.json "criteria", "passes"): H's
-    interval, and the playback judged by window (:class:`~jaxdse._app.windows.WindowCriteria`:
-    peak deviation, dominant mode, RMS error of P and Q in % of MBASE)."""
-
-    max_interval_percent: float = 10.0
-    """Largest half width of H's 95 % interval [%]."""
-
-
-@dataclasses.dataclass(frozen=True)
 class FleetPlant:
     """One plant of the fleet: its units, its columns and the :class:`GeneratorRun` built from them."""
 
@@ -91,7 +81,9 @@ class Fleet:
     identify: IdentifySettings | None
     verdict: VerdictSettings
     criteria: dict
-    """The :class:`Criteria`, as a dict."""
+    """[criteria]: the limits of the model validation (fleet.json "validation"), the
+    :class:`~jaxdse._app.windows.WindowCriteria` as a dict; H's verdict has its own thresholds
+    ([identify])."""
     figures: bool = True
     playback: PlaybackOptions = PlaybackOptions()
     """[playback]: the surrogate or the units' own .dyr models."""
@@ -139,8 +131,8 @@ def load_fleet(path) -> Fleet:
     out = subtable(path, data, "output", "output")
     no_unknown(path, out, {"figures"}, "output.")
     figures = typed_value(path, bool, out.get("figures", True), "output.figures")
-    criteria = dataclasses.asdict(Criteria(**options(
-        path, Criteria, subtable(path, data, "criteria", "criteria"), "criteria.")))
+    criteria = dataclasses.asdict(WindowCriteria(**options(
+        path, WindowCriteria, subtable(path, data, "criteria", "criteria"), "criteria.")))
     shared = measurement_section(path, {**meas, "columns": {}}, raw.basfrq_hz, "")
     table = load_table(list(shared.file), shared.format, csv_options=shared.csv_options)
     if "unit" in data:

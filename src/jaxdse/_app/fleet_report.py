@@ -17,7 +17,10 @@ from .._core.verdict import NOTES, VERDICTS
 
 COLOURS = {"identified": "#1a9850", "weakly identified": "#fdae61", "not identified": "#d73027",
            "failed": "#7f7f7f"}
-"""Verdict -> colour (figures and table)."""
+"""H's verdict -> colour (figures and table)."""
+VALIDATION_COLOURS = {"pass": "#1a9850", "fail": "#d73027", "not judged": "#7f7f7f"}
+"""The model validation's result -> colour."""
+MODEL_NAMES = {"dyr": "own .dyr records", "surrogate": "surrogate (P only)"}
 
 CSS = """
 body{font-family:system-ui,sans-serif;margin:1.5em auto;max-width:1150px;color:#222;padding:0 1em}
@@ -108,54 +111,76 @@ def plot_overview(units: list[dict], path: Path) -> None:
 
 
 class PlaybackFigure:
-    """Measured against played-back x2, I_t, P_t and Q_t, the event window shaded: one figure
+    """Measured against played-back x2, I_t, P_t and Q_t, each with the residual (replay minus
+    measurement) in a panel below, the event window shaded where one was found: one figure
     whose lines are redrawn for each unit (a new figure's axes took ~40 % of its time)."""
 
-    LABELS = {"x2": "speed deviation x2 [rad/s]", "I_t": "I_t [pu]", "P_t": "P_t [pu]", "Q_t": "Q_t [pu]"}
+    LABELS = {"x2": "speed deviation\nx2 [rad/s]", "I_t": "current I_t [pu]",
+              "P_t": "active power\nP_t [pu]", "Q_t": "reactive power\nQ_t [pu]"}
 
     def __init__(self):
         plt = _plt()
-        self.fig, self.axes = plt.subplots(4, 1, sharex=True, figsize=(9, 8))
-        self.lines, self.spans = [], [None] * 4
-        for ax, k in zip(self.axes, self.LABELS):
-            meas, = ax.plot([], [], lw=0.8, color="k", label="measured")
-            sim, = ax.plot([], [], lw=0.9, color="tab:red", alpha=0.85, label="simulated")
+        ratios = [3, 1] * len(self.LABELS)
+        self.fig, axes = plt.subplots(2 * len(self.LABELS), 1, sharex=True, figsize=(9, 11),
+                                      gridspec_kw={"height_ratios": ratios})
+        self.axes = axes[0::2]
+        self.res_axes = axes[1::2]
+        self.lines, self.res_lines, self.spans = [], [], [None] * (2 * len(self.LABELS))
+        for ax, rax, k in zip(self.axes, self.res_axes, self.LABELS):
+            sim, = ax.plot([], [], lw=1.8, color="tab:red", alpha=0.55, label="simulated", zorder=2)
+            meas, = ax.plot([], [], lw=0.8, color="k", label="measured", zorder=3)
             self.lines.append((meas, sim))
-            ax.set_ylabel(self.LABELS[k], fontsize=9)
-            ax.grid(alpha=0.3)
-        self.legend = self.axes[0].legend(loc="upper right", fontsize=8)
-        self.axes[-1].set_xlabel("time [s] (shaded: event window)")
-        self.title = self.fig.suptitle("", fontsize=11)
+            res, = rax.plot([], [], lw=0.8, color="tab:red")
+            rax.axhline(0.0, color="k", lw=0.5)
+            self.res_lines.append(res)
+            ax.set_ylabel(self.LABELS[k], fontsize=8)
+            rax.set_ylabel("sim − meas", fontsize=7)
+            rax.tick_params(labelsize=7)
+            for a in (ax, rax):
+                a.grid(alpha=0.3)
+        handles = [self.lines[0][0], self.lines[0][1]]
+        self.legend = self.axes[0].legend(handles=handles, loc="upper right", fontsize=8)
+        self.xlabel = self.res_axes[-1].set_xlabel("")
+        self.title = self.fig.suptitle("", fontsize=10)
         # fixed margins: tight_layout measures every tick label and took 0.3 s of 0.4 s per unit
-        self.fig.subplots_adjust(left=0.1, right=0.98, bottom=0.07, top=0.94, hspace=0.12)
+        self.fig.subplots_adjust(left=0.12, right=0.98, bottom=0.05, top=0.94, hspace=0.15)
 
     def draw(self, e: dict, tr: dict, path: Path) -> None:
         """Draw unit ``e``'s traces ``tr`` and save the figure to ``path``."""
         t = tr["time_s"]
-        pw = e["playback_windows"]
-        t_event = pw["onset_s"]
-        event = pw["windows"]["event"] if pw["windows"] else (0, 0)
+        val = e["validation"]
+        pw = val["windows"] or {}
+        t_event = pw.get("onset_s")
+        event = (pw.get("windows") or {}).get("event", (0, 0))
         event_s = (event[1] - event[0]) * (t[1] - t[0])
-        for j, (ax, (line_m, line_s), k) in enumerate(zip(self.axes, self.lines, self.LABELS)):
+        for j, k in enumerate(self.LABELS):
             meas, sim = tr[k]
+            line_m, line_s = self.lines[j]
             line_m.set_data(t, meas)
             line_s.set_data(t, sim)
-            if self.spans[j] is not None:
-                self.spans[j].remove()
-            self.spans[j] = (ax.axvspan(t_event, t_event + event_s, color="tab:blue", alpha=0.08)
-                             if t_event is not None else None)
-            ax.set_autoscaley_on(True)
-            ax.relim()
-            ax.autoscale_view()
+            self.res_lines[j].set_data(t, sim - meas)
+            for i, ax in ((2 * j, self.axes[j]), (2 * j + 1, self.res_axes[j])):
+                if self.spans[i] is not None:
+                    self.spans[i].remove()
+                self.spans[i] = (ax.axvspan(t_event, t_event + event_s, color="tab:blue", alpha=0.08)
+                                 if t_event is not None else None)
+                ax.set_autoscaley_on(True)
+                ax.relim()
+                ax.autoscale_view()
             fin = meas[np.isfinite(meas)]
             if fin.size:
                 lo, hi = float(fin.min()), float(fin.max())
                 pad = 0.5 * max(hi - lo, 1e-6 * max(abs(hi), 1.0))
                 sim_f = sim[np.isfinite(sim)]
                 if sim_f.size and (sim_f.min() < lo - 4 * pad or sim_f.max() > hi + 4 * pad):
-                    ax.set_ylim(lo - 4 * pad, hi + 4 * pad)
+                    self.axes[j].set_ylim(lo - 4 * pad, hi + 4 * pad)
         self.legend.get_texts()[1].set_text(_sim_label(e))
-        self.title.set_text(f"{e['name']}: measured vs simulated — {e['verdict']}")
+        kind = ("time [s] (shaded: event window)" if t_event is not None
+                else "time [s] (ambient recording: no disturbance found, no event window)")
+        self.xlabel.set_text(kind)
+        head = "disturbance recording" if t_event is not None else "ambient recording"
+        self.title.set_text(f"{e['name']}, {head}: measured and simulated\nH: {e['verdict']} · model "
+                            f"validation ({MODEL_NAMES[val['model']]}): {val['result']}")
         self.fig.savefig(path, dpi=90)
 
     def close(self) -> None:
@@ -213,19 +238,19 @@ def _page(title: str, body: str, script: bool = False) -> str:
             "</body></html>\n")
 
 
+def _vbadge(e: dict) -> str:
+    val = e["validation"]
+    return (f'<span class="v" style="background:{VALIDATION_COLOURS[val["result"]]}">'
+            f'{html.escape(val["result"])}</span> <span class="small">{html.escape(MODEL_NAMES[val["model"]])}</span>')
+
+
 def _attention(units: list[dict]) -> list[dict]:
-    """Units to look at first: worst verdict, then failed criteria, then largest |H error|."""
-    todo = [e for e in units if e["verdict"] != "identified" or not e["passes"]]
-    return sorted(todo, key=lambda e: (-VERDICTS.index(e["verdict"]), e["passes"],
+    """Units to look at first: H not identified or the model validation not passed; worst of
+    the two first (H's verdict, then the validation), then the largest |H error|."""
+    todo = [e for e in units if e["verdict"] != "identified" or e["validation"]["result"] != "pass"]
+    order = {"fail": 0, "not judged": 1, "pass": 2}
+    return sorted(todo, key=lambda e: (-VERDICTS.index(e["verdict"]), order[e["validation"]["result"]],
                                        -abs(e["H_error_percent"] or 0.0)))
-
-
-def _pf(ok: bool) -> str:
-    return "pass" if ok else "fail"
-
-
-def _limit(c: dict) -> str:
-    return "" if c["limit"] is None else f"≤ {c['limit']:g}"
 
 
 def _mode(m: dict) -> str:
@@ -234,16 +259,22 @@ def _mode(m: dict) -> str:
     return f"{m['frequency_hz']:.2f} Hz, ζ {100 * m['damping_ratio']:.1f} %"
 
 
-def _why_short(e: dict) -> str:
-    failed = [r for c in e["criteria"].values() if not c["pass"] for r in (c.get("reasons") or [c["what"]])]
-    return (_decisive(e) or ["fails the criteria: " + "; ".join(failed)])[0]
+def _attention_line(e: dict) -> str:
+    """H's verdict and the validation's result, each with its first reason."""
+    parts = [f"H {_badge(e['verdict'])}" + (f" {html.escape(_decisive(e)[0])}" if _decisive(e) else "")]
+    val = e["validation"]
+    why = f" {html.escape(val['reasons'][0])}" if val["reasons"] else ""
+    parts.append(f"model validation {_vbadge(e)}{why}")
+    return " · ".join(parts)
 
 
 def fleet_page(doc: dict, figures: bool) -> str:
     units, s = doc["units"], doc["summary"]
+    order = {"pass": 0, "not judged": 1, "fail": 2}
     rows = []
     for e in units:
         err = e["H_error_percent"]
+        val = e["validation"]
         rows.append(
             f"<tr><td><a href=\"units/{html.escape(e['name'])}.html\">{html.escape(e['name'])}</a></td>"
             f"<td>{e['bus']}</td><td>{e['s_mva']:.0f}</td>"
@@ -254,56 +285,70 @@ def fleet_page(doc: dict, figures: bool) -> str:
             f"<td data-sort=\"{_f(abs(err) if err is not None else None, '.3f')}\">"
             f"{_f(err, '+.1f')}</td>"
             f"<td data-sort=\"{VERDICTS.index(e['verdict'])}\">{_badge(e['verdict'])}</td>"
-            f"<td class=\"{_pf(e['passes'])}\">{_pf(e['passes'])}</td></tr>")
+            f"<td data-sort=\"{order[val['result']]}\">{_vbadge(e)}</td></tr>")
     todo = _attention(units)
     attention = "".join(
         f"<li><a href=\"units/{html.escape(e['name'])}.html\">{html.escape(e['name'])}</a>: "
-        f"{_badge(e['verdict'])} {html.escape(_why_short(e))}</li>" for e in todo[:10]) \
-        or "<li>none: every unit is identified and passes the criteria</li>"
+        f"{_attention_line(e)}</li>" for e in todo[:10]) \
+        or "<li>none: H is identified and the model validation passes for every unit</li>"
+    if len(todo) > 10:
+        attention += f"<li>… and {len(todo) - 10} more (sort the table below)</li>"
     skipped = "".join(f"<li>{html.escape(str(k['name']))} (bus {k['bus']}): {html.escape(k['reason'])}</li>"
                       for k in doc["skipped"])
     crit = doc["criteria"]
     median = s["median_abs_H_error_percent"]
+    models = ", ".join(f"{MODEL_NAMES[m]} {n}" for m, n in s["validation_models"].items())
+    results = ", ".join(f'<span class="v" style="background:{VALIDATION_COLOURS[r]}">{r}</span> {n}'
+                        for r, n in s["validation"].items())
     body = f"""
-<h1>Fleet model validation: inertia from PMU recordings</h1>
+<h1>Fleet: inertia from PMU recordings and model validation</h1>
 <p class="small">{html.escape(doc['source'])} · jaxdse {html.escape(doc['jaxdse_version'])} ·
 case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revision']}) and
 {html.escape(Path(doc['case']['dyr']).name)} · {doc['wall_time_s']:.0f} s</p>
-<p><b>{s['units']}</b> units estimated ({s['skipped']} skipped). Verdicts:
-{', '.join(f'{_badge(v)} {n}' for v, n in s['verdicts'].items())}. Median |H − H<sub>.dyr</sub>|:
-<b>{_f(median, '.1f')} %</b>; {s['within_10_percent']} of {s['units']} within 10 %.
-Units identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}
-{html.escape(', '.join(s['identified_outside_10_percent']))}.</p>
+<p><b>{s['units']}</b> units estimated ({s['skipped']} skipped). Two separate results per unit:</p>
+<ul>
+<li><b>Inertia H</b> (what the recording says about H): {', '.join(f'{_badge(v)} {n}' for v, n in s['verdicts'].items())}.
+Median |H − H<sub>.dyr</sub>|: <b>{_f(median, '.1f')} %</b>; {s['within_10_percent']} of {s['units']} within 10 %.
+Identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}
+{html.escape(', '.join(s['identified_outside_10_percent']))}.</li>
+<li><b>Model validation</b> (NERC MOD-026-2: the played-back model against the recorded response):
+{results}; played back with {html.escape(models)}.</li>
+</ul>
 <h2>Look at these first</h2>
 <ul>{attention}</ul>
-<h2>Estimate against the model</h2>
+<h2>Estimated H against the model</h2>
 {'<img src="overview.png" alt="estimated H with intervals against the .dyr H">' * figures}
 <p class="small">Dots: the batch estimate of H (s, on the plant's summed MBASE); bars: its 95 %
 interval; black dashes: the MBASE-weighted H of the plant's machine records in the .dyr.
-Colour = verdict: green identified (interval within ±10 %, playback follows the data), orange
-weakly identified, red not identified (the data cannot tell H apart), grey failed.</p>
+Colour = H's verdict: green identified (95 % interval within ±10 %), orange weakly identified
+(an estimate, not tight enough to file), red not identified (the data cannot tell H apart),
+grey failed. H's verdict says nothing about the model validation, and the other way round.</p>
 <h2>All units</h2>
-<p class="small">Click a column heading to sort. Model validation in the terms of NERC
+<p class="small">Click a column heading to sort. <b>Model validation</b> in the terms of NERC
 MOD-026-2: the simulated response to the disturbance must match the recorded one, active
 power/frequency and reactive power/voltage; the Transmission Planner sets the acceptance
-criteria ([criteria] of the fleet file). Here: the 95 % interval of H within
-±{crit['max_interval_percent']:g} %; in the event window ({crit['event_s']:g} s from the onset), the
-replay's peak deviation of P and Q within {crit['min_peak_ratio']:g}-{crit['max_peak_ratio']:g}x the
-measured one, its dominant mode damped at least {crit['min_damping_ratio_fraction']:g}x as much as
-the measured one and within {100 * crit['max_mode_frequency_error']:g} % of its frequency, RMS error
-of P ≤ {crit['max_rms_percent_mbase_p']:g} % and of Q ≤ {crit['max_rms_percent_mbase_q']:g} % of
-MBASE in each window, and no more than {crit['max_post_oscillation_ratio']:g}x the measured
-oscillation after the event window. A whole-record average (sMAPE) is reported, never judged.</p>
+criteria ([criteria] of the fleet file). The model played back is the unit's own .dyr records
+(the recorded terminal voltage imposed) wherever jaxdse simulates every one of them; otherwise
+the 3rd-order surrogate with the identified H and D, which validates active power/frequency
+only. Criteria: in the event window ({crit['event_s']:g} s from the onset), the replay's peak
+deviation of P and Q within {crit['min_peak_ratio']:g}-{crit['max_peak_ratio']:g}x the measured
+one; the measurement's dominant electromechanical mode and the replay's mode nearest to it in
+frequency: damped at least {crit['min_damping_ratio_fraction']:g}x as much and within
+{100 * crit['max_mode_frequency_error']:g} % of its frequency; RMS error of P ≤
+{crit['max_rms_percent_mbase_p']:g} % and of Q ≤ {crit['max_rms_percent_mbase_q']:g} % of MBASE
+in each window; no more than {crit['max_post_oscillation_ratio']:g}x the measured oscillation
+after the event window. A recording without a disturbance is not judged. A whole-record
+average (sMAPE) is reported, never judged.</p>
 <table class="sortable"><thead><tr><th>unit</th><th>bus</th><th>MVA</th><th>machine model</th>
 <th>governor(s)</th><th>H [s]</th><th>95 % interval [s]</th><th>.dyr H [s]</th><th>difference [%]</th>
-<th>verdict</th><th>criteria</th></tr></thead><tbody>
+<th>H's verdict</th><th>model validation</th></tr></thead><tbody>
 {''.join(rows)}
 </tbody></table>
 {f'<h2>Skipped</h2><ul>{skipped}</ul>' if skipped else ''}
 <p class="small">Also: <a href="fleet.json">fleet.json</a> (every number), <a href="fleet.csv">fleet.csv</a>,
 <a href="report.md">report.md</a>.</p>
 """
-    return _page("Fleet model validation", body, script=True)
+    return _page("Fleet: inertia and model validation", body, script=True)
 
 
 def unit_page(e: dict, doc: dict, figures: bool) -> str:
@@ -312,8 +357,7 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     fallbacks = ("<p><b>Plant data fallbacks</b> (the .dyr records as read, and what jaxdse did):</p><ul>"
                  + "".join(f"<li>{html.escape(f)}</li>" for f in e.get("fallbacks", [])) + "</ul>"
                  if e.get("fallbacks") else "")
-    why = {"identified": "The recording determines H to within ±10 % at 95 % confidence and the "
-                         "playback with the identified H and D follows the measurement.",
+    why = {"identified": "The recording determines H to within ±10 % at 95 % confidence.",
            "weakly identified": "An estimate is given, but it is not tight enough to file as identified:",
            "not identified": "The recording does not tell H apart; the number is not usable:",
            "failed": "The estimate failed:"}[e["verdict"]]
@@ -325,6 +369,7 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
                ("difference [%]", _f(e["H_error_percent"], "+.1f")),
                ("D [pu torque / (rad/s)]", _f(e["D"], ".4g")),
                ("95 % interval of D", " – ".join(_f(x, ".4g") for x in (e["D_ci95"] or [None, None]))),
+               ("D as in the GENROU record, D·ω<sub>s</sub> [pu torque / pu speed]", _f(_genrou_d(e, e["D"]), ".4g")),
                ("interval half width [%]", _f(it["relative_ci_percent"], ".1f")),
                ("  of which measurement noise [%]", _f(it["noise_percent"], ".1f")),
                ("  model error: filter spread, enters as 1.96x [%]", _f(it["filter_spread_percent"], ".1f")),
@@ -334,14 +379,16 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
                ("online DREM/I&I H [s]", _f(e["online"]["H_s"], ".3f")),
                ("torque offset the data ask for [pu]", _f(e["identification"].get("t_m_offset_pu"), ".4f")),
                ("governor gain error [-]", _f(e["identification"].get("governor_gain_error"), ".3f"))]
-    num_rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>" for k, v in numbers)
-    crit_rows = "".join(
-        f"<tr><td>{html.escape(c['what'])}</td><td>{_f(c['value'])}</td>"
-        f"<td>{_limit(c)}</td>"
-        f"<td class=\"{_pf(c['pass'])}\">{_pf(c['pass'])}"
-        + "".join(f"<br>{html.escape(r)}" for r in c.get("reasons", [])) + "</td></tr>"
-        for c in e["criteria"].values())
-    pw = e["playback_windows"]
+    num_rows = "".join(f"<tr><td>{k if '<sub>' in k else html.escape(k)}</td><td>{v}</td></tr>"
+                       for k, v in numbers)
+    val = e["validation"]
+    pw = val["windows"] or {"onset_s": None, "scores": []}
+    val_text = {"pass": "The played-back model follows the recorded response within the criteria.",
+                "fail": "The played-back model does not follow the recorded response:",
+                "not judged": "Not judged:"}[val["result"]]
+    val_reasons = "".join(f"<li>{html.escape(r)}</li>" for r in val["reasons"])
+    onset = (f"Event onset {_f(pw['onset_s'], '.2f')} s." if pw["onset_s"] is not None
+             else "No disturbance found in the recording: an ambient recording, nothing judged by window.")
     win_rows = "".join(
         f"<tr><td>{sc['window']}</td><td>{sc['channel']}</td>"
         f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td>"
@@ -365,29 +412,30 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     cols = "".join(f"<li>{k}: <code>{html.escape(str(v))}</code></li>" for k, v in e["columns"].items())
     body = f"""
 <p><a href="../report.html">← fleet</a></p>
-<h1>{name} {_badge(e['verdict'])}</h1>
+<h1>{name}: H {_badge(e['verdict'])} · model validation {_vbadge(e)}</h1>
 <p>Bus {e['bus']} ({e['bus_kv']:g} kV), {e['s_mva']:.0f} MVA, {len(e['units'])} unit(s);
 governor model(s): {html.escape(', '.join(e['governor_models']))}; PMU at the
 {'machine terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
-<h2>Verdict: {html.escape(e['verdict'])}</h2><p>{why}</p>{f'<ul>{reasons}</ul>' if reasons else ''}
+<p>Two separate results: what the recording says about the inertia H, and whether the
+played-back model matches the recorded response. Neither implies the other.</p>
+<h2>Inertia H: {_badge(e['verdict'])}</h2><p>{why}</p>{f'<ul>{reasons}</ul>' if reasons else ''}
 {f'<p>Notes (do not change the verdict):</p><ul>{note_list}</ul>' if note_list else ''}
-<h2>Playback: measured against simulated</h2>
-{f'<img src="{name}.png" alt="measured and simulated x2, I_t, P_t, Q_t">' * figures}
+<h2>Model validation: {_vbadge(e)}</h2>
+<p>{val_text}</p>{f'<ul>{val_reasons}</ul>' if val_reasons else ''}
+<p class="small">What was validated: {html.escape(val['scope'])}.</p>
+{f'<img src="{name}.png" alt="measured and simulated x2, I_t, P_t, Q_t with residuals">' * figures}
 {_playback_text(e)}
-<h2>Numbers</h2><table>{num_rows}</table>
-<h2>Acceptance criteria</h2>
-<table><tr><th>quantity</th><th>value</th><th>limit</th><th>result</th></tr>{crit_rows}</table>
-<h2>Playback by window</h2>
-<p class="small">Event onset {_f(pw['onset_s'], '.2f')} s (None: no disturbance found, nothing
-judged). Deviations and errors in % of MBASE (x2: % of synchronous speed); peak deviation
-from each trace's own pre-event value; the aligned error is the RMS error at the best shift
-of the replay; modes (frequency, damping ratio) by the matrix pencil method, event window.
-Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.2f')} %, Q
-{_f(e['playback_rms_percent_mbase']['Q_t'], '.2f')} % of MBASE (playback model:
-{html.escape(e['playback_model'])}).</p>
+<h3>By window</h3>
+<p class="small">{onset} Deviations and errors in % of MBASE (x2: % of synchronous speed); peak
+deviation from each trace's own pre-event value; the aligned error is the RMS error at the
+best shift of the replay; modes (frequency, damping ratio) by the matrix pencil method in the
+event window: the measurement's dominant electromechanical mode and the replay's mode nearest
+to it. Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.3g')} %, Q
+{_f(e['playback_rms_percent_mbase']['Q_t'], '.3g')} % of MBASE.</p>
 <table><tr><th>window</th><th>signal</th><th>peak dev. measured</th><th>peak dev. replay</th>
 <th>RMS error</th><th>aligned RMS error (shift)</th><th>mode measured</th><th>mode replay</th></tr>
 {win_rows}</table>
+<h2>Numbers of the H estimate</h2><table>{num_rows}</table>
 <h2>Plant (from the PSS/E case)</h2>
 {fallbacks}
 <table><tr><th>unit ID</th><th>model</th><th>MBASE [MVA]</th><th>H [s]</th><th>governor</th></tr>
@@ -397,20 +445,30 @@ Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.2f')} %,
 <h2>Provenance</h2><p class="small">jaxdse {html.escape(doc['jaxdse_version'])}; fleet file
 {html.escape(doc['config']['file'])} (sha256 {doc['config']['sha256']})</p><ul class="small">{inputs}</ul>
 """
-    return _page(f"{e['name']}: {e['verdict']}", body)
+    return _page(f"{e['name']}: H {e['verdict']}, model validation {val['result']}", body)
+
+
+def _genrou_d(e: dict, d):
+    """D [pu torque per rad/s] in the GENROU record's convention, D·w_s [pu torque per pu speed]."""
+    if d is None:
+        return None
+    return d * 2.0 * math.pi * float(e["machine"]["f_nominal_hz"])
 
 
 def fleet_markdown(doc: dict) -> str:
     s = doc["summary"]
     lines = [f"# Fleet: {doc['source']}", "",
-             f"{s['units']} units, {s['skipped']} skipped; median |H error| "
-             f"{_f(s['median_abs_H_error_percent'], '.1f')} %; verdicts {s['verdicts']}.", "",
-             "| unit | MVA | governor(s) | H [s] | 95 % interval [s] | .dyr H [s] | error [%] | verdict "
-             "| criteria |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             f"{s['units']} units, {s['skipped']} skipped. H: "
+             + ", ".join(f"{v} {n}" for v, n in s["verdicts"].items())
+             + f"; median |H error| {_f(s['median_abs_H_error_percent'], '.1f')} %. Model validation: "
+             + ", ".join(f"{r} {n}" for r, n in s["validation"].items())
+             + " (" + ", ".join(f"{MODEL_NAMES[m]} {n}" for m, n in s["validation_models"].items()) + ").", "",
+             "| unit | MVA | governor(s) | H [s] | 95 % interval [s] | .dyr H [s] | error [%] | H's verdict "
+             "| model validation | model played back |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for e in doc["units"]:
         lines.append(f"| {e['name']} | {e['s_mva']:.0f} | {'/'.join(e['governor_models'])} | "
                      f"{_f(e['H_s'])} | "
                      f"{_ci(e)} | {_f(e['H_reference_s'])} | {_f(e['H_error_percent'], '+.1f')} | "
-                     f"{e['verdict']} | {_pf(e['passes'])} |")
+                     f"{e['verdict']} | {e['validation']['result']} | {MODEL_NAMES[e['validation']['model']]} |")
     return "\n".join(lines) + "\n"
