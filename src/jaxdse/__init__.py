@@ -98,8 +98,12 @@ from ._many.tune import tune as tune
 from ._many.tune import tuning_loss as tuning_loss
 from ._models.base import AbstractExciter as AbstractExciter
 from ._models.base import AbstractStabiliser as AbstractStabiliser
+from ._models.exciters import ESAC1A as ESAC1A
+from ._models.exciters import ESAC6A as ESAC6A
 from ._models.exciters import ESDC2A as ESDC2A
 from ._models.exciters import ESST3A as ESST3A
+from ._models.exciters import EXAC1 as EXAC1
+from ._models.exciters import EXAC2 as EXAC2
 from ._models.exciters import EXDC2 as EXDC2
 from ._models.exciters import EXST1 as EXST1
 from ._models.exciters import IEEEX1 as IEEEX1

@@ -1,6 +1,7 @@
 """PSS/E excitation-system models as equinox modules, by IEEE Std 421.5 type: ``dc`` (IEEEX1,
-EXDC2, ESDC2A), ``st`` (EXST1, ESST3A), ``simplified`` (SEXS); the registry of PSS/E names and
-CON orders, and :func:`exciter_from_dyr`, the one place that reads a record into a module.
+EXDC2, ESDC2A), ``st`` (EXST1, ESST3A), ``simplified`` (SEXS), ``ac`` (ESAC1A, EXAC1,
+EXAC2, ESAC6A); the registry of PSS/E names and CON orders, and :func:`exciter_from_dyr`, the
+one place that reads a record into a module.
 
 Every model subclasses :class:`~jaxdse._models.base.AbstractExciter` (machine base, per unit,
 seconds). Conventions shared by all of them:
@@ -15,21 +16,24 @@ seconds). Conventions shared by all of them:
 * non-windup limits (IEEE Std 421.5-2016, Annex E) block the derivative that would push the
   state further out; downstream blocks see the state clipped to its limits;
 * the block that produces Efd must be dynamic (SEXS TE > 0, EXST1 TA > 0, DC exciters TE > 0,
-  ESST3A TA > 0 or TM > 0): with it bypassed, Efd would depend on Vref directly, and
+  ESST3A TA > 0 or TM > 0, AC exciters TE > 0): with it bypassed, Efd would depend on Vref directly, and
   ``efd(state, inputs)`` does not see Vref. Such records are refused with a ValueError;
 * ``initial_state(efd0, inputs)`` solves the steady state in closed form with VOTHSG = 0
   (the DC exciters' saturation and ESST3A's rectifier loading need no iteration: Efd is given,
-  and they are explicit functions of Efd and the inputs). The operating point is assumed to lie
+  and they are explicit functions of Efd and the inputs; the AC exciters' VE follows from Efd in
+  closed form, one formula per branch of FEX). The operating point is assumed to lie
   within the limits (no limit is active in the returned steady state).
 
 Sources: Siemens PTI, *PSS(R)E Model Library* (block diagram of each model, CON tables);
 IEEE Std 421.5-2005/2016 *Recommended Practice for Excitation System Models for Power System
-Stability Studies* (DC1A/DC2A, ST1A, ST3A, the rectifier regulation function FEX of Annex D,
+Stability Studies* (DC1A/DC2A, AC1A, AC6A, ST1A, ST3A, the rectifier regulation function FEX of Annex D,
 non-windup limits of Annex E); for the structure only, the BSD-3 implementations OpenIPSL
 (``OpenIPSL.Electrical.Controls.PSSE.ES``: SEXS, IEEEX1, ESDC2A, EXST1, the PSS/E quadratic
 saturation ``NonElectrical.Functions.SE`` and the PSS/E DC exciter set-up
 ``calculate_dc_exciter_params``, citing the PSS/E Program Application Guide vol. 2, 15.2.4) and
 PowerSimulationsDynamics.jl (SEXS, EXST1); PowerWorld's exciter pages for the parameter lists.
+The AC types (:mod:`.ac`) also follow the 1981 IEEE Committee Report (AC1, AC2, IEEE Trans.
+PAS-100(2)) and, for the structure, OpenIPSL's ESAC1A, EXAC1 and EXAC2.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from collections.abc import Sequence
 from typing import Literal
 
 from ..base import AbstractExciter
+from .ac import ESAC1A, ESAC6A, EXAC1, EXAC2
 from .common import rectifier_fex, saturation, saturation_product
 from .dc import ESDC2A, EXDC2, IEEEX1
 from .simplified import SEXS
@@ -47,11 +52,14 @@ from .st import ESST3A, EXST1
 # --- PSS/E records ----------------------------------------------------------------------------
 
 EXCITERS: dict[str, type[AbstractExciter]] = {
-    "SEXS": SEXS, "IEEEX1": IEEEX1, "EXDC2": EXDC2, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A}
+    "SEXS": SEXS, "IEEEX1": IEEEX1, "EXDC2": EXDC2, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A,
+    "ESAC1A": ESAC1A, "EXAC1": EXAC1, "EXAC2": EXAC2, "ESAC6A": ESAC6A}
 """The exciter models by their PSS/E name."""
 
 _DC_CONS = ("TR", "KA", "TA", "TB", "TC", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF1", "Switch",
             "E1", "SE(E1)", "E2", "SE(E2)")
+_SAT_CONS = ("E1", "SE(E1)", "E2", "SE(E2)")
+_SAT_FIELDS = ("e1_pu", "se1", "e2_pu", "se2")
 _DC_FIELDS = ("t_r_s", "ka", "t_a_s", "t_b_s", "t_c_s", "vr_max_pu", "vr_min_pu", "ke", "t_e_s",
               "kf", "t_f_s", "switch", "e1_pu", "se1", "e2_pu", "se2")
 
@@ -63,6 +71,14 @@ EXCITER_FIELDS: dict[str, tuple[str, ...]] = {
     "EXST1": ("TR", "VIMAX", "VIMIN", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KC", "KF", "TF"),
     "ESST3A": ("TR", "VIMAX", "VIMIN", "KM", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KG", "KP",
                "KI", "VBMAX", "KC", "XL", "VGMAX", "THETAP", "TM", "VMMAX", "VMMIN"),
+    "ESAC1A": ("TR", "TB", "TC", "KA", "TA", "VAMAX", "VAMIN", "TE", "KF", "TF", "KC", "KD", "KE",
+               *_SAT_CONS, "VRMAX", "VRMIN"),
+    "EXAC1": ("TR", "TB", "TC", "KA", "TA", "VRMAX", "VRMIN", "TE", "KF", "TF", "KC", "KD", "KE",
+              *_SAT_CONS),
+    "EXAC2": ("TR", "TB", "TC", "KA", "TA", "VAMAX", "VAMIN", "KB", "VRMAX", "VRMIN", "TE", "KL",
+              "KH", "KF", "TF", "KC", "KD", "KE", "VLR", *_SAT_CONS),
+    "ESAC6A": ("TR", "KA", "TA", "TK", "TB", "TC", "VAMAX", "VAMIN", "VRMAX", "VRMIN", "TE",
+               "VFELIM", "KH", "VHMAX", "TH", "TJ", "KC", "KD", "KE", *_SAT_CONS),
 }
 """PSS/E CON names of each exciter record, in PSS/E CON order (Siemens PTI, PSS/E Model Library)."""
 
@@ -76,6 +92,16 @@ _ATTRIBUTES: dict[str, tuple[str, ...]] = {
     "ESST3A": ("t_r_s", "vi_max_pu", "vi_min_pu", "km", "t_c_s", "t_b_s", "ka", "t_a_s",
                "vr_max_pu", "vr_min_pu", "kg", "kp", "ki", "vb_max_pu", "kc", "xl_pu",
                "vg_max_pu", "theta_p_rad", "t_m_s", "vm_max_pu", "vm_min_pu"),
+    "ESAC1A": ("t_r_s", "t_b_s", "t_c_s", "ka", "t_a_s", "va_max_pu", "va_min_pu", "t_e_s", "kf",
+               "t_f_s", "kc", "kd", "ke", *_SAT_FIELDS, "vr_max_pu", "vr_min_pu"),
+    "EXAC1": ("t_r_s", "t_b_s", "t_c_s", "ka", "t_a_s", "vr_max_pu", "vr_min_pu", "t_e_s", "kf",
+              "t_f_s", "kc", "kd", "ke", *_SAT_FIELDS),
+    "EXAC2": ("t_r_s", "t_b_s", "t_c_s", "ka", "t_a_s", "va_max_pu", "va_min_pu", "kb",
+              "vr_max_pu", "vr_min_pu", "t_e_s", "kl", "kh", "kf", "t_f_s", "kc", "kd", "ke",
+              "vlr_pu", *_SAT_FIELDS),
+    "ESAC6A": ("t_r_s", "ka", "t_a_s", "t_k_s", "t_b_s", "t_c_s", "va_max_pu", "va_min_pu",
+               "vr_max_pu", "vr_min_pu", "t_e_s", "vfe_lim_pu", "kh", "vh_max_pu", "t_h_s",
+               "t_j_s", "kc", "kd", "ke", *_SAT_FIELDS),
 }
 
 
@@ -127,5 +153,6 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
         raise ValueError(message if message.startswith(name) else f"{name}: {message}") from None
 
 
-__all__ = ["ESDC2A", "ESST3A", "EXCITERS", "EXCITER_FIELDS", "EXDC2", "EXST1", "IEEEX1", "SEXS",
-           "exciter_from_dyr", "rectifier_fex", "saturation", "saturation_product"]
+__all__ = ["ESAC1A", "ESAC6A", "ESDC2A", "ESST3A", "EXAC1", "EXAC2", "EXCITERS", "EXCITER_FIELDS",
+           "EXDC2", "EXST1", "IEEEX1", "SEXS", "exciter_from_dyr", "rectifier_fex", "saturation",
+           "saturation_product"]
