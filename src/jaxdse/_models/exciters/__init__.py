@@ -1,5 +1,6 @@
 """PSS/E excitation-system models as equinox modules, by IEEE Std 421.5 type: ``dc`` (IEEEX1,
-EXDC2, ESDC2A), ``st`` (EXST1, ESST3A), ``simplified`` (SEXS), ``ac`` (ESAC1A, EXAC1,
+IEEET1, EXDC2, ESDC1A, ESDC2A), ``st`` (EXST1, ESST1A, ESST3A, ESST4B, EXPIC1),
+``simplified`` (SEXS, SCRX), ``ac`` (ESAC1A, EXAC1,
 EXAC2, ESAC6A); the registry of PSS/E names and CON orders, and :func:`exciter_from_dyr`, the
 one place that reads a record into a module.
 
@@ -18,6 +19,9 @@ seconds). Conventions shared by all of them:
 * the block that produces Efd must be dynamic (SEXS TE > 0, EXST1 TA > 0, DC exciters TE > 0,
   ESST3A TA > 0 or TM > 0, AC exciters TE > 0): with it bypassed, Efd would depend on Vref directly, and
   ``efd(state, inputs)`` does not see Vref. Such records are refused with a ValueError;
+  except by ESST4B, ESST1A, EXPIC1 and SCRX, whose real records bypass it (TA = 0, TE = 0):
+  their last state holds the Vref of ``initial_state`` (zero derivative), which
+  ``efd(state, inputs)`` uses unless ``efd(state, inputs, vref)`` is given;
 * ``initial_state(efd0, inputs)`` solves the steady state in closed form with VOTHSG = 0
   (the DC exciters' saturation and ESST3A's rectifier loading need no iteration: Efd is given,
   and they are explicit functions of Efd and the inputs; the AC exciters' VE follows from Efd in
@@ -45,14 +49,16 @@ from typing import Literal
 from ..base import AbstractExciter
 from .ac import ESAC1A, ESAC6A, EXAC1, EXAC2
 from .common import rectifier_fex, saturation, saturation_product
-from .dc import ESDC2A, EXDC2, IEEEX1
-from .simplified import SEXS
-from .st import ESST3A, EXST1
+from .dc import ESDC1A, ESDC2A, EXDC2, IEEET1, IEEEX1
+from .simplified import SCRX, SEXS
+from .st import ESST1A, ESST3A, ESST4B, EXPIC1, EXST1
 
 # --- PSS/E records ----------------------------------------------------------------------------
 
 EXCITERS: dict[str, type[AbstractExciter]] = {
     "SEXS": SEXS, "IEEEX1": IEEEX1, "EXDC2": EXDC2, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A,
+    "IEEET1": IEEET1, "ESDC1A": ESDC1A, "ESST4B": ESST4B, "ESST1A": ESST1A, "SCRX": SCRX,
+    "EXPIC1": EXPIC1,
     "ESAC1A": ESAC1A, "EXAC1": EXAC1, "EXAC2": EXAC2, "ESAC6A": ESAC6A}
 """The exciter models by their PSS/E name."""
 
@@ -71,6 +77,16 @@ EXCITER_FIELDS: dict[str, tuple[str, ...]] = {
     "EXST1": ("TR", "VIMAX", "VIMIN", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KC", "KF", "TF"),
     "ESST3A": ("TR", "VIMAX", "VIMIN", "KM", "TC", "TB", "KA", "TA", "VRMAX", "VRMIN", "KG", "KP",
                "KI", "VBMAX", "KC", "XL", "VGMAX", "THETAP", "TM", "VMMAX", "VMMIN"),
+    "IEEET1": ("TR", "KA", "TA", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF", "Switch", "E1", "SE(E1)",
+               "E2", "SE(E2)"),
+    "ESDC1A": _DC_CONS,
+    "ESST4B": ("TR", "KPR", "KIR", "VRMAX", "VRMIN", "TA", "KPM", "KIM", "VMMAX", "VMMIN", "KG", "KP",
+               "KI", "VBMAX", "KC", "XL", "THETAP"),
+    "ESST1A": ("UEL", "VOS", "TR", "VIMAX", "VIMIN", "TC", "TB", "TC1", "TB1", "KA", "TA", "VAMAX",
+               "VAMIN", "VRMAX", "VRMIN", "KC", "KF", "TF", "KLR", "ILR"),
+    "SCRX": ("TA/TB", "TB", "K", "TE", "EMIN", "EMAX", "CSWITCH", "rc/rfd"),
+    "EXPIC1": ("TR", "KA", "TA1", "VR1", "VR2", "TA2", "TA3", "TA4", "VRMAX", "VRMIN", "KF", "TF1",
+               "TF2", "EFDMAX", "EFDMIN", "KE", "TE", "E1", "SE(E1)", "E2", "SE(E2)", "KP", "KI", "KC"),
     "ESAC1A": ("TR", "TB", "TC", "KA", "TA", "VAMAX", "VAMIN", "TE", "KF", "TF", "KC", "KD", "KE",
                *_SAT_CONS, "VRMAX", "VRMIN"),
     "EXAC1": ("TR", "TB", "TC", "KA", "TA", "VRMAX", "VRMIN", "TE", "KF", "TF", "KC", "KD", "KE",
@@ -92,6 +108,18 @@ _ATTRIBUTES: dict[str, tuple[str, ...]] = {
     "ESST3A": ("t_r_s", "vi_max_pu", "vi_min_pu", "km", "t_c_s", "t_b_s", "ka", "t_a_s",
                "vr_max_pu", "vr_min_pu", "kg", "kp", "ki", "vb_max_pu", "kc", "xl_pu",
                "vg_max_pu", "theta_p_rad", "t_m_s", "vm_max_pu", "vm_min_pu"),
+    "IEEET1": ("t_r_s", "ka", "t_a_s", "vr_max_pu", "vr_min_pu", "ke", "t_e_s", "kf", "t_f_s",
+               "switch", "e1_pu", "se1", "e2_pu", "se2"),
+    "ESDC1A": _DC_FIELDS,
+    "ESST4B": ("t_r_s", "kpr", "kir", "vr_max_pu", "vr_min_pu", "t_a_s", "kpm", "kim", "vm_max_pu",
+               "vm_min_pu", "kg", "kp", "ki", "vb_max_pu", "kc", "xl_pu", "theta_p_rad"),
+    "ESST1A": ("uel", "vos", "t_r_s", "vi_max_pu", "vi_min_pu", "t_c_s", "t_b_s", "t_c1_s", "t_b1_s",
+               "ka", "t_a_s", "va_max_pu", "va_min_pu", "vr_max_pu", "vr_min_pu", "kc", "kf", "t_f_s",
+               "klr", "ilr_pu"),
+    "SCRX": ("ta_tb", "t_b_s", "k", "t_e_s", "e_min_pu", "e_max_pu", "cswitch", "rc_rfd"),
+    "EXPIC1": ("t_r_s", "ka", "t_a1_s", "vr1_pu", "vr2_pu", "t_a2_s", "t_a3_s", "t_a4_s", "vr_max_pu",
+               "vr_min_pu", "kf", "t_f1_s", "t_f2_s", "efd_max_pu", "efd_min_pu", "ke", "t_e_s",
+               "e1_pu", "se1", "e2_pu", "se2", "kp", "ki", "kc"),
     "ESAC1A": ("t_r_s", "t_b_s", "t_c_s", "ka", "t_a_s", "va_max_pu", "va_min_pu", "t_e_s", "kf",
                "t_f_s", "kc", "kd", "ke", *_SAT_FIELDS, "vr_max_pu", "vr_min_pu"),
     "EXAC1": ("t_r_s", "t_b_s", "t_c_s", "ka", "t_a_s", "vr_max_pu", "vr_min_pu", "t_e_s", "kf",
@@ -109,7 +137,8 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
                      ke_zero: Literal["psse", "literal"] = "psse") -> AbstractExciter:
     """The exciter of a PSS/E .dyr record: ``model`` (e.g. ``"ESST3A"``) and its CONs in order.
 
-    Conversions: ESST3A THETAP from degrees to radians. DC exciters (IEEEX1, EXDC2, ESDC2A): VRMAX = 0
+    Conversions: ESST3A and ESST4B THETAP from degrees to radians. DC exciters (IEEEX1, IEEET1,
+    EXDC2, ESDC1A, ESDC2A): VRMAX = 0
     is PSS/E's "compute the limits" entry, VRMAX = (SE(E2) + KE)·E2 for KE > 0 and SE(E2)·E2
     otherwise, VRMIN = -VRMAX (PSS/E Program Application Guide, as OpenIPSL implements it);
     KE = 0 is kept (KE then follows from the initial EFD, see :class:`IEEEX1`). With
@@ -133,9 +162,9 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
     if bad:
         raise ValueError(f"{name}: non-finite constant(s) {', '.join(bad)}")
     kwargs = dict(zip(_ATTRIBUTES[name], values))
-    if name == "ESST3A":
+    if name in ("ESST3A", "ESST4B"):
         kwargs["theta_p_rad"] = math.radians(kwargs["theta_p_rad"])
-    dc = name in ("IEEEX1", "EXDC2", "ESDC2A")
+    dc = name in ("IEEEX1", "IEEET1", "EXDC2", "ESDC1A", "ESDC2A")
     if dc and kwargs["vr_max_pu"] == 0.0 and ke_zero == "literal":
         kwargs["vr_max_pu"] = math.inf
     elif dc and kwargs["vr_max_pu"] == 0.0:
@@ -153,6 +182,6 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
         raise ValueError(message if message.startswith(name) else f"{name}: {message}") from None
 
 
-__all__ = ["ESAC1A", "ESAC6A", "ESDC2A", "ESST3A", "EXAC1", "EXAC2", "EXCITERS", "EXCITER_FIELDS",
-           "EXDC2", "EXST1", "IEEEX1", "SEXS", "exciter_from_dyr", "rectifier_fex", "saturation",
-           "saturation_product"]
+__all__ = ["ESAC1A", "ESAC6A", "ESDC1A", "ESDC2A", "ESST1A", "ESST3A", "ESST4B", "EXAC1", "EXAC2",
+           "EXCITERS", "EXCITER_FIELDS", "EXDC2", "EXPIC1", "EXST1", "IEEET1", "IEEEX1", "SCRX",
+           "SEXS", "exciter_from_dyr", "rectifier_fex", "saturation", "saturation_product"]

@@ -1,4 +1,5 @@
-"""DC-commutator exciters of IEEE Std 421.5 (DC1A, DC2A) as PSS/E models: IEEEX1, EXDC2, ESDC2A (shared conventions: :mod:`jaxdse._models.exciters`)."""
+"""DC-commutator exciters of IEEE Std 421.5 (DC1A, DC2A) and the 1968 IEEE type 1 as PSS/E models:
+IEEEX1, IEEET1, EXDC2, ESDC1A, ESDC2A (shared conventions: :mod:`jaxdse._models.exciters`)."""
 
 from __future__ import annotations
 
@@ -193,4 +194,74 @@ class ESDC2A(_DCExciter):
         return blocked(x_efd, d, 0.0, jnp.inf)
 
 
-__all__ = ["ESDC2A", "EXDC2", "IEEEX1"]
+class IEEET1(_DCExciter):
+    """PSS/E IEEET1: the 1968 IEEE Type 1 excitation system (DC commutator exciter).
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "IEEET1"; IEEE Committee Report,
+    "Computer representation of excitation systems", IEEE Trans. PAS-87(6), 1968, type 1;
+    OpenIPSL ``IEEET1`` for the structure): :class:`_DCExciter` without the lead-lag,
+
+        VM  = EC/(1 + s TR)
+        VR  = KA/(1 + s TA) (Vref + VOTHSG - VM - VF), non-windup limits [VRMIN, VRMAX]
+        TE dEFD/dt = VR - (KE + SE(EFD)) EFD,   VF = s KF/(1 + s TF) EFD
+
+    14 CONs: TR, KA, TA, VRMAX, VRMIN, KE, TE, KF, TF, Switch, E1, SE(E1), E2, SE(E2) (units
+    as :class:`_DCExciter`; Switch is not used by PSS/E and kept for the record). No limit on
+    EFD. The PSS/E quadratic saturation, the KE = 0 rule (VR = VRMAX/10 at initialisation) and
+    the VRMAX = 0 rule of :func:`~jaxdse._models.exciters.exciter_from_dyr` apply. ``t_b_s``
+    and ``t_c_s`` exist only to share the DC layout: they must be 0.
+    """
+
+    t_b_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Not part of IEEET1 (no lead-lag): must be 0 [s]."""
+    t_c_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Not part of IEEET1 (no lead-lag): must be 0 [s]."""
+
+    def __check_init__(self):
+        if all_concrete(self.t_b_s, self.t_c_s):
+            check_that(self, (self.t_b_s == 0) & (self.t_c_s == 0),
+                       "IEEET1 has no lead-lag (t_b_s = t_c_s = 0)")
+
+
+class ESDC1A(_DCExciter):
+    """PSS/E ESDC1A: the IEEE Std 421.5-2005 type DC1A excitation system.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "ESDC1A", citing IEEE Std 421.5-2005
+    type DC1A; OpenIPSL ``ESDC1A`` for the structure): :class:`_DCExciter` -- sensor lag TR,
+    lead-lag (1 + s TC)/(1 + s TB), regulator KA/(1 + s TA) with non-windup limits
+    [VRMIN, VRMAX] (not scaled by the terminal voltage, unlike ESDC2A), exciter
+    TE dEFD/dt = VR - (KE + SE(EFD)) EFD with EFD held at or above 0 (non-windup lower limit
+    on the exciter integrator, as OpenIPSL's PSS/E ESDC1A and :class:`ESDC2A`), rate feedback
+    s KF/(1 + s TF1) from EFD. VUEL enters through an HV gate and is absent here.
+
+    16 CONs, the order of :class:`IEEEX1`: TR, KA, TA, TB, TC, VRMAX, VRMIN, KE, TE, KF, TF1,
+    Switch, E1, SE(E1), E2, SE(E2). The PSS/E quadratic saturation, the KE = 0 rule and the
+    VRMAX = 0 rule apply (PSS/E's, not ANDES 2.0's: ANDES skips TR, keeps VR at 0 and reads
+    KE = 0 literally).
+    """
+
+    ka: Float[Array, ""] = eqx.field(converter=as_float, default=400.0)
+    """KA: voltage regulator gain [pu/pu] (> 0)."""
+    t_a_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TA: voltage regulator time constant [s] (0: gain KA, limited)."""
+    vr_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=9.0)
+    """VRMAX: upper limit of the regulator output VR [pu]."""
+    vr_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-5.43)
+    """VRMIN: lower limit of the regulator output VR [pu]."""
+    e1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=5.25)
+    """E1: first exciter voltage at which the saturation is given [pu]."""
+    se1: Float[Array, ""] = eqx.field(converter=as_float, default=0.03)
+    """SE(E1): saturation factor at E1 [-]."""
+    e2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=7.0)
+    """E2: second exciter voltage at which the saturation is given [pu]."""
+    se2: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """SE(E2): saturation factor at E2 [-]."""
+
+    def _efd_out(self, x_efd):
+        return jnp.maximum(x_efd, 0.0)
+
+    def _d_efd(self, x_efd, d):
+        return blocked(x_efd, d, 0.0, jnp.inf)
+
+
+__all__ = ["ESDC1A", "ESDC2A", "EXDC2", "IEEEX1", "IEEET1"]
