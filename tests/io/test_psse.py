@@ -314,10 +314,11 @@ def test_raw_revisions(tmp_path, revision):
 
 
 def test_raw_unsupported_revision_and_errors(tmp_path):
-    for rev in ("34", "31"):
+    for rev in ("37", "31"):
         p = write(tmp_path, f"r{rev}.raw", RAW33.replace(", 33, 0, 1", f", {rev}, 0, 1", 1))
         with pytest.raises(jd.InputError, match=rf"r{rev}.raw, row 1: case identification gives revision "
-                                                rf"{rev}; only PSS/E raw revisions 32 and 33"):
+                                                rf"{rev}; only PSS/E raw revisions 32, 33, 34, 35 and 36 "
+                                                "are supported$"):
             psse.read_raw(p)
     # revision only in the comment; BASFRQ absent -> 60 Hz
     p = write(tmp_path, "norev.raw", RAW33.replace("0,   100.00, 33, 0, 1, 50.00     / PSS(R)E-33.10",
