@@ -128,7 +128,7 @@ def _rk4(model, x0, inputs, vref, n, dt):
         k3 = f(x + 0.5 * dt * k2)
         k4 = f(x + dt * k3)
         x = x + dt / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-        return x, (model.efd(x, inputs), x)
+        return x, (model.efd(x, inputs, vref), x)
 
     _, (efd, xs) = jax.lax.scan(step, x0, None, length=n)
     return efd, xs
@@ -179,7 +179,7 @@ def test_initial_state_is_steady(name):
         d = np.asarray(model.vector_field(x0, inputs, vref))
         # residual: the rounding of Vref - Vt, amplified by KA/TA (KA = 300, TA = 0.01: ~7e-12)
         np.testing.assert_allclose(d, 0.0, atol=1e-11, err_msg=f"{name} at Efd0 = {efd0}")
-        assert float(model.efd(x0, inputs)) == pytest.approx(efd0, abs=1e-13)
+        assert float(model.efd(x0, inputs, vref)) == pytest.approx(efd0, abs=1e-13)
 
 
 def test_ke_zero_gives_vr_vrmax_over_ten():
@@ -338,7 +338,7 @@ def test_exst1_field_voltage_limits_follow_vt_and_ifd():
     hi = 3.0 * float(inputs.vt_pu) - 0.2 * float(inputs.ifd_pu)
     assert efd[-1] == pytest.approx(hi, abs=1e-14) and xs[-1, 2] > hi + 1.0  # windup: VR runs on
     moved = inputs._replace(vt_pu=jnp.asarray(0.9), ifd_pu=jnp.asarray(3.0))
-    assert float(model.efd(jnp.asarray(xs[-1]), moved)) == pytest.approx(3.0 * 0.9 - 0.2 * 3.0)
+    assert float(model.efd(jnp.asarray(xs[-1]), moved, vref)) == pytest.approx(3.0 * 0.9 - 0.2 * 3.0)
     efd, _ = simulate(model, x0, inputs, vref - 0.5, 1.0)
     lo = -1.0 * float(inputs.vt_pu) - 0.2 * float(inputs.ifd_pu)
     assert efd[-1] == pytest.approx(lo, abs=1e-14)
@@ -369,7 +369,7 @@ def test_esst3a_tm_zero_solves_the_inner_loop():
     vb = float(model.vb(inputs))
     for vr in [0.5, 1.6, 1.9, 3.0, -1.0]:
         x = x0.at[2].set(vr)
-        efd = float(model.efd(x, inputs))
+        efd = float(model.efd(x, inputs, vref))
         vm = efd / vb
         vg = min(float(model.kg) * efd, 1.5)
         target = min(max(float(model.km) * (vr - vg), 0.0), 2.0)
@@ -386,7 +386,8 @@ def _loss(model, efd0, inputs):
     stepped = inputs._replace(vt_pu=inputs.vt_pu - 0.01)
     d = model.vector_field(x, stepped, vref + 0.02)
     x = x + 0.01 * d
-    return vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref)) + model.efd(x, stepped)
+    return (vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref))
+            + model.efd(x, stepped, vref + 0.02))
 
 
 @pytest.mark.parametrize("name", list(ZERO_T))
@@ -408,10 +409,10 @@ def test_esst3a_without_source_voltage():
     dead = inputs._replace(vt_pu=jnp.asarray(0.0), v_re_pu=jnp.asarray(0.0),
                            v_im_pu=jnp.asarray(0.0), i_re_pu=jnp.asarray(0.0),
                            i_im_pu=jnp.asarray(0.0))
-    assert float(model.vb(dead)) == 0.0 and float(model.efd(x0, dead)) == 0.0
+    assert float(model.vb(dead)) == 0.0 and float(model.efd(x0, dead, vref)) == 0.0
 
     def f(m):
-        return m.efd(x0, dead) + jnp.sum(m.vector_field(x0, dead, vref))
+        return m.efd(x0, dead, vref) + jnp.sum(m.vector_field(x0, dead, vref))
 
     leaves = jtu.tree_leaves(eqx.filter_grad(f)(model))
     assert all(bool(jnp.all(jnp.isfinite(g))) for g in leaves)
@@ -439,7 +440,7 @@ def test_vmap_over_parameter_sets_equals_loop(name):
     def run(m):
         x0, vref = m.initial_state(efd0, inputs)
         x = x0 * (1.0 + 0.01 * jnp.arange(m.n_states)) + 0.003
-        return x0, vref, m.vector_field(x, inputs, vref + 0.01), m.efd(x, inputs)
+        return x0, vref, m.vector_field(x, inputs, vref + 0.01), m.efd(x, inputs, vref + 0.01)
 
     batched = jax.jit(jax.vmap(run))(stacked)
     single = jax.jit(run)

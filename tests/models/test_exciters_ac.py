@@ -111,7 +111,7 @@ def module_rhs(model):
             m = jtu.tree_unflatten(treedef, list(p))
             zero = 0.0 * u[0]  # the AC exciters read Vt, Ifd and VOTHSG only
             inputs = ExciterInputs(u[0], u[0], zero, zero, zero, u[1], u[2])
-            return m.vector_field(x, inputs, u[3]), m.efd(x, inputs)
+            return m.vector_field(x, inputs, u[3]), m.efd(x, inputs, u[3])
 
         _COMPILED[treedef] = jax.jit(f)
     return _COMPILED[treedef], np.array([float(v) for v in leaves])
@@ -519,7 +519,8 @@ def _loss(model, efd0, inputs):
     stepped = inputs._replace(vt_pu=inputs.vt_pu - 0.01)
     d = model.vector_field(x, stepped, vref + 0.02)
     x = x + 0.01 * d
-    return vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref)) + model.efd(x, stepped)
+    return (vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref))
+            + model.efd(x, stepped, vref + 0.02))
 
 
 @pytest.mark.parametrize("name", list(ZERO_T))
@@ -537,9 +538,9 @@ def test_zero_time_constants_no_nan(name):
 
     def f(m):
         x = x0.at[3].set(0.0)
-        return m.efd(x, dead) + jnp.sum(m.vector_field(x, dead, vref))
+        return m.efd(x, dead, vref) + jnp.sum(m.vector_field(x, dead, vref))
 
-    assert float(model.efd(x0.at[3].set(0.0), dead)) == 0.0
+    assert float(model.efd(x0.at[3].set(0.0), dead, vref)) == 0.0
     assert all(bool(jnp.all(jnp.isfinite(g))) for g in jtu.tree_leaves(eqx.filter_grad(f)(model)))
 
 
@@ -552,7 +553,7 @@ def test_vmap_over_parameter_sets_equals_loop(name):
     def one(m):
         x0, vref = m.initial_state(2.4, inputs)
         x = x0 * (1.0 + 0.01 * jnp.arange(m.n_states)) + 0.003
-        return x0, vref, m.vector_field(x, inputs, vref + 0.01), m.efd(x, inputs)
+        return x0, vref, m.vector_field(x, inputs, vref + 0.01), m.efd(x, inputs, vref + 0.01)
 
     batched = jax.jit(jax.vmap(one))(stacked)
     for k, m in enumerate(models):

@@ -52,7 +52,6 @@ from jaxdse._models.exciters import (
 from jaxdse._models.machines import GENROU
 
 NEW = (IEEET1, ESDC1A, ESST4B, ESST1A, EXPIC1, SCRX)
-HOLDS_VREF = (ESST4B, ESST1A, EXPIC1, SCRX)
 DYR = (Path(__file__).resolve().parents[2].parent / "shared" / "data" / "activsg2000"
        / "ACTIVSg2000_dynamics.dyr")
 
@@ -118,7 +117,7 @@ def _compiled(treedef):
     @jax.jit
     def out(p, x, u):
         m, inp = unpack(p, u)
-        return m.efd(x, inp, u[7]) if isinstance(m, HOLDS_VREF) else m.efd(x, inp)
+        return m.efd(x, inp, u[7])
 
     @jax.jit
     def init(p, efd0, u):
@@ -231,9 +230,8 @@ def test_initial_state_is_steady(name):
         assert x0.shape == (STEADY[name].n_states,) and np.all(np.isfinite(x0))
         assert np.max(np.abs(mod.rhs(x0, u))) < 1e-9, (name, o)
         assert mod.out(x0, u) == pytest.approx(o.efd0, abs=1e-12)
-        if isinstance(STEADY[name], HOLDS_VREF):  # the held reference is the one returned
-            assert x0[-1] == vref
-            assert float(STEADY[name].efd(jnp.asarray(x0), inputs_of(u))) == pytest.approx(o.efd0, abs=1e-12)
+        efd = STEADY[name].efd(jnp.asarray(x0), inputs_of(u), vref)
+        assert float(efd) == pytest.approx(o.efd0, abs=1e-12)
 
 
 FLAT = ["ESST4B-record", "EXPIC1-record", "IEEET1-record", "ESDC1A-record", "SCRX-record",
@@ -770,7 +768,7 @@ def _loss(model, efd0, inputs):
     stepped = inputs._replace(vt_pu=inputs.vt_pu - 0.01)
     d = model.vector_field(x, stepped, vref + 0.02)
     x = x + 0.01 * d
-    efd = model.efd(x, stepped, vref + 0.02) if isinstance(model, HOLDS_VREF) else model.efd(x, stepped)
+    efd = model.efd(x, stepped, vref + 0.02)
     return vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref)) + efd
 
 
@@ -784,7 +782,7 @@ def test_zero_time_constants_no_nan(name):
     assert any(float(jnp.abs(g)) > 0 for g in leaves)
 
 
-# --- the .dyr unit: the held Vref serves a unit that calls efd(state, inputs) ------------------------
+# --- the .dyr unit passes its Vref to efd(state, inputs, vref) --------------------------------------
 
 def test_dyr_unit_with_algebraic_exciter():
     machine = GENROU(td0_1_s=6.5, td0_2_s=0.05, tq0_1_s=1.26, tq0_2_s=0.08, h_s=5.0, d_pu=0.0,
@@ -889,7 +887,7 @@ def test_activsg2000_records_initialise():
             if isinstance(m, ESST4B):
                 efd0 = jnp.minimum(efd0, 0.8 * m.vb(u) * m.vm_max_pu)
             x0, vref = m.initial_state(efd0, u)
-            efd = m.efd(x0, u, vref) if isinstance(m, HOLDS_VREF) else m.efd(x0, u)
+            efd = m.efd(x0, u, vref)
             return x0, vref, m.vector_field(x0, u, vref), efd - efd0, efd0
 
         x0, vref, d, miss, efd0 = jax.jit(jax.vmap(one))(stacked)

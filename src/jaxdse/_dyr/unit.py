@@ -92,7 +92,7 @@ class DyrUnit(eqx.Module):
         vs = (jnp.zeros_like(tm) if self.stabiliser is None
               else self.stabiliser.output(y_s, self._stab_inputs(y_m, out, u, tm)))
         efd = (refs.efd0_pu if self.exciter is None
-               else self.exciter.efd(y_e, self._exc_inputs(out, u, vs)))
+               else self.exciter.efd(y_e, self._exc_inputs(out, u, vs), refs.vref_pu))
         return out, efd, tm, vs
 
     def vector_field(self, y, u: UnitInputs, refs: UnitReferences):

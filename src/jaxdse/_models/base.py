@@ -75,8 +75,11 @@ class AbstractExciter(eqx.Module):
         """d(state)/dt."""
 
     @abc.abstractmethod
-    def efd(self, state, inputs: ExciterInputs):
-        """Field voltage Efd [pu]."""
+    def efd(self, state, inputs: ExciterInputs, vref):
+        """Field voltage Efd [pu] at ``state`` with voltage reference ``vref`` [pu] (the one
+        ``initial_state`` returned, or a moved one): a model whose Efd-producing block is
+        bypassed (TA = 0, TE = 0) gives Efd as an algebraic function of Vref; the others
+        ignore it."""
 
 
 class AbstractStabiliser(eqx.Module):

@@ -16,12 +16,11 @@ seconds). Conventions shared by all of them:
   bypassed blocks replaced by 1 (no NaN in value or gradient);
 * non-windup limits (IEEE Std 421.5-2016, Annex E) block the derivative that would push the
   state further out; downstream blocks see the state clipped to its limits;
-* the block that produces Efd must be dynamic (SEXS TE > 0, EXST1 TA > 0, DC exciters TE > 0,
-  ESST3A TA > 0 or TM > 0, AC exciters TE > 0): with it bypassed, Efd would depend on Vref directly, and
-  ``efd(state, inputs)`` does not see Vref. Such records are refused with a ValueError;
-  except by ESST4B, ESST1A, EXPIC1 and SCRX, whose real records bypass it (TA = 0, TE = 0):
-  their last state holds the Vref of ``initial_state`` (zero derivative), which
-  ``efd(state, inputs)`` uses unless ``efd(state, inputs, vref)`` is given;
+* ``efd(state, inputs, vref)`` gets the voltage reference: ESST4B, ESST1A, EXPIC1 and SCRX,
+  whose real records bypass the block that produces Efd (TA = 0, TE = 0), give Efd as an
+  algebraic function of Vref through it; the others ignore it, and require that block to be
+  dynamic (SEXS TE > 0, EXST1 TA > 0, DC exciters TE > 0, ESST3A TA > 0 or TM > 0, AC exciters
+  TE > 0; other records are refused with a ValueError);
 * ``initial_state(efd0, inputs)`` solves the steady state in closed form with VOTHSG = 0
   (the DC exciters' saturation and ESST3A's rectifier loading need no iteration: Efd is given,
   and they are explicit functions of Efd and the inputs; the AC exciters' VE follows from Efd in

@@ -128,7 +128,7 @@ class _ACExciter(AbstractExciter):
         _, _, d_e = self._exciter(state[_VE], vr, inputs.ifd_pu)
         return jnp.stack([d0, d1, d2, d_e, d4])
 
-    def efd(self, state, inputs: ExciterInputs):
+    def efd(self, state, inputs: ExciterInputs, vref):
         return self.rectified(jnp.maximum(state[_VE], 0.0), inputs.ifd_pu)
 
 

@@ -121,7 +121,7 @@ class _DCExciter(AbstractExciter):
         d_e = self._d_efd(state[3], (vr - state[5] * efd - self._vx(efd)) / self.t_e_s)
         return jnp.stack([d_m, d_ll, d_r, d_e, d_f, jnp.zeros_like(d_e)])
 
-    def efd(self, state, inputs: ExciterInputs):
+    def efd(self, state, inputs: ExciterInputs, vref):
         return self._efd_out(state[3])
 
 

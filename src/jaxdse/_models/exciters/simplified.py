@@ -61,7 +61,7 @@ class SEXS(AbstractExciter):
         _, d_e = nonwindup_lag(y, state[1], self.t_e_s, self.e_min_pu, self.e_max_pu, gain=self.k)
         return jnp.stack([d_ll, d_e])
 
-    def efd(self, state, inputs: ExciterInputs):
+    def efd(self, state, inputs: ExciterInputs, vref):
         return jnp.clip(state[1], self.e_min_pu, self.e_max_pu)
 
 
@@ -90,11 +90,11 @@ class SCRX(AbstractExciter):
     8 CONs: TA/TB [-], TB [s], K [pu], TE [s], EMIN, EMAX [pu], CSWITCH (0 or 1), rc/rfd [-]
     (ratio of the field discharge resistance to the field winding resistance; 0: the bridge
     carries negative field current). TB = 0 bypasses the lead-lag; TE = 0 makes the output the
-    limited gain K (state kept, zero derivative), so that EFD depends on Vref directly: the last
-    state holds the Vref of ``initial_state``, which ``efd(state, inputs)`` uses unless ``vref``
-    is given. Steady state: EX = EFD0/ET (bus fed) or EFD0, within [EMIN, EMAX], with IFD >= 0.
+    limited gain K (state kept, zero derivative), so that EFD depends on Vref directly
+    (``efd(state, inputs, vref)``). Steady state: EX = EFD0/ET (bus fed) or EFD0, within
+    [EMIN, EMAX], with IFD >= 0.
 
-    States: [lead-lag state, EX, Vref held].
+    States: [lead-lag state, EX].
     """
 
     ta_tb: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
@@ -123,7 +123,7 @@ class SCRX(AbstractExciter):
 
     @property
     def n_states(self) -> int:
-        return 3
+        return 2
 
     def _source(self, inputs: ExciterInputs):
         return inputs.vt_pu if self.cswitch == 0 else jnp.ones_like(inputs.vt_pu)
@@ -134,7 +134,7 @@ class SCRX(AbstractExciter):
         src = self._source(inputs)
         ex0 = efd0 / jnp.where(src != 0, src, 1.0)
         u0 = ex0 / self.k
-        return jnp.stack([u0, ex0, vt + u0]), vt + u0
+        return jnp.stack([u0, ex0]), vt + u0
 
     def _chain(self, state, inputs: ExciterInputs, vref):
         u = vref + inputs.vs_pu - inputs.vt_pu
@@ -142,13 +142,13 @@ class SCRX(AbstractExciter):
         ex, d_e = nonwindup_lag(y, state[1], self.t_e_s, self.e_min_pu, self.e_max_pu, gain=self.k)
         crowbar = (self.rc_rfd > 0) & (inputs.ifd_pu < 0)
         efd = jnp.where(crowbar, -self.rc_rfd * inputs.ifd_pu, ex * self._source(inputs))
-        return efd, jnp.stack([d_ll, d_e, jnp.zeros_like(d_e)])
+        return efd, jnp.stack([d_ll, d_e])
 
     def vector_field(self, state, inputs: ExciterInputs, vref):
         return self._chain(state, inputs, vref)[1]
 
-    def efd(self, state, inputs: ExciterInputs, vref=None):
-        return self._chain(state, inputs, state[-1] if vref is None else vref)[0]
+    def efd(self, state, inputs: ExciterInputs, vref):
+        return self._chain(state, inputs, vref)[0]
 
 
 __all__ = ["SCRX", "SEXS"]

@@ -84,7 +84,7 @@ class EXST1(AbstractExciter):
         d_r = (self.ka * y - vr) / self.t_a_s
         return jnp.stack([d_m, d_ll, d_r, d_f])
 
-    def efd(self, state, inputs: ExciterInputs):
+    def efd(self, state, inputs: ExciterInputs, vref):
         lo = inputs.vt_pu * self.vr_min_pu - self.kc * inputs.ifd_pu
         hi = inputs.vt_pu * self.vr_max_pu - self.kc * inputs.ifd_pu
         return jnp.clip(state[2], lo, hi)
@@ -227,7 +227,7 @@ class ESST3A(AbstractExciter):
                                     self.vm_min_pu, self.vm_max_pu), 0.0)
         return jnp.stack([d_s, d_ll, d_r, d_m])
 
-    def efd(self, state, inputs: ExciterInputs):
+    def efd(self, state, inputs: ExciterInputs, vref):
         vb = self.vb(inputs)
         vr = jnp.clip(state[2], self.vr_min_pu, self.vr_max_pu)  # TM = 0 needs TA > 0
         return vb * self._vm(state, vr, vb)
@@ -237,9 +237,7 @@ class ESST3A(AbstractExciter):
 # --- shared pieces of ESST4B, ESST1A, EXPIC1 ----------------------------------------------------
 #
 # These models let Efd depend on Vref directly when the blocks between them are bypassed (TA = 0
-# and a proportional path): their last state holds the Vref that ``initial_state`` returned, and
-# ``efd(state, inputs)`` uses it unless ``vref`` is given. Its derivative is 0;
-# ``vector_field`` uses the Vref it is given.
+# and a proportional path): ``efd(state, inputs, vref)`` evaluates that path with the Vref given.
 
 def _icon(x) -> int:
     """An integer ICON from a .dyr number (1.0 -> 1); ValueError for a non-integer."""
@@ -322,8 +320,8 @@ class ESST4B(AbstractExciter):
     inputs 0, so Vref = EC, VR = VA = KG·EFD0 held by the outer integrator and VM = EFD0/VB by
     the inner one -- whatever the gains.
 
-    States: [VM_s, outer integrator, VA, inner integrator, Vref held]. Efd may depend on Vref
-    directly (TA = 0): ``efd(state, inputs)`` uses the held Vref unless ``vref`` is given.
+    States: [VM_s, outer integrator, VA, inner integrator]. Efd may depend on Vref directly
+    (TA = 0): ``efd(state, inputs, vref)``.
     """
 
     t_r_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
@@ -373,7 +371,7 @@ class ESST4B(AbstractExciter):
 
     @property
     def n_states(self) -> int:
-        return 5
+        return 4
 
     def vb(self, inputs: ExciterInputs):
         """VB = min(VE·FEX(KC·IFD/VE), VBMAX) [pu]: the available exciter voltage."""
@@ -392,7 +390,7 @@ class ESST4B(AbstractExciter):
         efd = vb * vm
         _, d_m = _pi_nonwindup(va - self.kg * efd, state[3], self.kpm, self.kim,
                                self.vm_min_pu, self.vm_max_pu)
-        return efd, jnp.stack([d_s, d_r, d_a, d_m, jnp.zeros_like(d_s)])
+        return efd, jnp.stack([d_s, d_r, d_a, d_m])
 
     def initial_state(self, efd0, inputs: ExciterInputs):
         efd0 = jnp.asarray(efd0, float)
@@ -400,13 +398,13 @@ class ESST4B(AbstractExciter):
         vb = self.vb(inputs)
         vm0 = efd0 / jnp.where(vb > 0, vb, 1.0)
         vr0 = self.kg * efd0
-        return jnp.stack([vt, vr0, vr0, vm0, vt]), vt
+        return jnp.stack([vt, vr0, vr0, vm0]), vt
 
     def vector_field(self, state, inputs: ExciterInputs, vref):
         return self._chain(state, inputs, vref)[1]
 
-    def efd(self, state, inputs: ExciterInputs, vref=None):
-        return self._chain(state, inputs, state[-1] if vref is None else vref)[0]
+    def efd(self, state, inputs: ExciterInputs, vref):
+        return self._chain(state, inputs, vref)[0]
 
 
 # --- ESST1A -----------------------------------------------------------------------------------
@@ -440,8 +438,8 @@ class ESST1A(AbstractExciter):
     :func:`_clipped_loop`). Steady state: VA = EFD0 + KLR·max(IFD0 - ILR, 0) within its limits,
     VF = 0, Vref = EC + VA/KA.
 
-    States: [VM_s, lead-lag 1, lead-lag 2, VA, rate feedback, Vref held]. Efd may depend on Vref
-    directly (TA = 0): ``efd(state, inputs)`` uses the held Vref unless ``vref`` is given.
+    States: [VM_s, lead-lag 1, lead-lag 2, VA, rate feedback]. Efd may depend on Vref directly
+    (TA = 0): ``efd(state, inputs, vref)``.
     """
 
     uel: int = eqx.field(static=True, converter=_icon, default=1)
@@ -502,7 +500,7 @@ class ESST1A(AbstractExciter):
 
     @property
     def n_states(self) -> int:
-        return 6
+        return 5
 
     def _ilr(self, inputs: ExciterInputs):
         return self.klr * jnp.maximum(inputs.ifd_pu - self.ilr_pu, 0.0)
@@ -533,7 +531,7 @@ class ESST1A(AbstractExciter):
         d_f = jnp.where(self.t_f_s > 0, (va_sum - state[4]) / safe(self.t_f_s), 0.0)
         vt = inputs.vt_pu
         efd = jnp.clip(va_sum, vt * self.vr_min_pu, vt * self.vr_max_pu - self.kc * inputs.ifd_pu)
-        return efd, jnp.stack([d_s, d_1, d_2, d_a, d_f, jnp.zeros_like(d_s)])
+        return efd, jnp.stack([d_s, d_1, d_2, d_a, d_f])
 
     def initial_state(self, efd0, inputs: ExciterInputs):
         efd0 = jnp.asarray(efd0, float)
@@ -541,13 +539,13 @@ class ESST1A(AbstractExciter):
         va0 = efd0 + self._ilr(inputs)
         u0 = va0 / self.ka
         vref = vt + u0
-        return jnp.stack([vt, u0, u0, va0, efd0, vref]), vref
+        return jnp.stack([vt, u0, u0, va0, efd0]), vref
 
     def vector_field(self, state, inputs: ExciterInputs, vref):
         return self._chain(state, inputs, vref)[1]
 
-    def efd(self, state, inputs: ExciterInputs, vref=None):
-        return self._chain(state, inputs, state[-1] if vref is None else vref)[0]
+    def efd(self, state, inputs: ExciterInputs, vref):
+        return self._chain(state, inputs, vref)[0]
 
 
 # --- EXPIC1 -----------------------------------------------------------------------------------
@@ -581,9 +579,8 @@ class EXPIC1(AbstractExciter):
     unlimited root). Steady state: VR = E0/VB with E0 = (KE + SE(EFD0)) EFD0 (EFD0 for TE = 0),
     the PI input 0 (Vref = EC), every filter at its input.
 
-    States: [VM_s, PI integrator, TA2 lag, TA3/TA4 lead-lag, TF1 filter, TF2 filter, EFD,
-    Vref held]. Efd may depend on Vref directly (TE = 0): ``efd(state, inputs)`` uses the held
-    Vref unless ``vref`` is given.
+    States: [VM_s, PI integrator, TA2 lag, TA3/TA4 lead-lag, TF1 filter, TF2 filter, EFD]. Efd
+    may depend on Vref directly (TE = 0): ``efd(state, inputs, vref)``.
     """
 
     t_r_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
@@ -650,7 +647,7 @@ class EXPIC1(AbstractExciter):
 
     @property
     def n_states(self) -> int:
-        return 8
+        return 7
 
     def vb(self, inputs: ExciterInputs):
         """VB = VE·FEX(KC·IFD/VE), VE = |KP·VT + j KI·IT| [pu]; 1 when KP = KI = 0."""
@@ -689,7 +686,7 @@ class EXPIC1(AbstractExciter):
         vx = saturation_product(x_e, self.e1_pu, self.se1, self.e2_pu, self.se2)
         d_e = jnp.where(on_e, (e0 - self.ke * x_e - vx) / safe(self.t_e_s), 0.0)
         efd = jnp.where(on_e, x_e, e0)
-        return efd, jnp.stack([d_s, d_i, d_2, d_3, d_f1, d_f2, d_e, jnp.zeros_like(d_s)])
+        return efd, jnp.stack([d_s, d_i, d_2, d_3, d_f1, d_f2, d_e])
 
     def initial_state(self, efd0, inputs: ExciterInputs):
         efd0 = jnp.asarray(efd0, float)
@@ -699,13 +696,13 @@ class EXPIC1(AbstractExciter):
         vb = self.vb(inputs)
         vr0 = e0 / jnp.where(vb > 0, vb, 1.0)
         x_f2 = jnp.where((self.t_f1_s > 0) | ~(self.t_f2_s > 0), 0.0, vr0)
-        return jnp.stack([vt, vr0, vr0, vr0, vr0, x_f2, efd0, vt]), vt
+        return jnp.stack([vt, vr0, vr0, vr0, vr0, x_f2, efd0]), vt
 
     def vector_field(self, state, inputs: ExciterInputs, vref):
         return self._chain(state, inputs, vref)[1]
 
-    def efd(self, state, inputs: ExciterInputs, vref=None):
-        return self._chain(state, inputs, state[-1] if vref is None else vref)[0]
+    def efd(self, state, inputs: ExciterInputs, vref):
+        return self._chain(state, inputs, vref)[0]
 
 
 __all__ = ["ESST1A", "ESST3A", "ESST4B", "EXPIC1", "EXST1"]
