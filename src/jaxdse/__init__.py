@@ -57,7 +57,9 @@ from ._dyr.calibrate import CalibrationSettings as CalibrationSettings
 from ._dyr.calibrate import Events as Events
 from ._dyr.calibrate import ParameterSpec as ParameterSpec
 from ._dyr.calibrate import Ranking as Ranking
+from ._dyr.calibrate import Decision as Decision
 from ._dyr.calibrate import calibrate as calibrate
+from ._dyr.calibrate import calibrate_where_rejected as calibrate_where_rejected
 from ._dyr.calibrate import measured_pq as measured_pq
 from ._dyr.calibrate import rank as rank
 from ._dyr.calibrate import stack_events as stack_events

@@ -47,7 +47,7 @@ def test_figures_have_labelled_axes_with_units(ambient, plant, estimate_jit, tmp
     labels = []
     monkeypatch.setattr(plt, "close", lambda fig: labels.extend(
         (ax.get_xlabel(), ax.get_ylabel()) for ax in fig.axes))
-    plot_estimates(est, "t", tmp_path)
+    plot_estimates(est, "t", tmp_path, float(plant.machine.omega_s))
     ylabels = [y for _, y in labels]
     assert all("[" in y and "]" in y for y in ylabels), ylabels
     assert any("time [s]" == x for x, _ in labels)

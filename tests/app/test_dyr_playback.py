@@ -34,6 +34,7 @@ def _case(tmp: Path, dyr_text: str, events=("line_trip",), tags=("B1_G1", "B2_G1
             "location = \"terminal\"\nvoltage_unit = \"pu\"\ncurrent_unit = \"pu\"\nangle_unit = \"deg\"\n"
             "s_base_mva = 100.0\nmin_segment_s = 10.0\n" + units
             + "\n[identify]\nenabled = false\n\n[playback]\nmodel = \"dyr\"\n"
+            + ("substeps = 2\n" if len(files) > 1 else "")   # a calibration fits with these too: time
             + (f"\n[calibrate]\nevents = {json.dumps(files[1:])}\nparameters = [\"H\"]\n"
                if len(files) > 1 else ""))
     (tmp / "fleet.toml").write_text(text)
@@ -105,9 +106,17 @@ def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     after = u["B1_G1"]["per_event"][0]["after_rms_percent_mbase"]
     before = u["B1_G1"]["per_event"][0]["before_rms_percent_mbase"]
     assert after["P_t"] < 0.5 * before["P_t"]
+    # a calibration never makes the model worse: H (rejected) changed, nothing else; no event
+    # worse; D at its physical bound or above
+    assert b1["H"]["status"] == "changed" and not (b1["H"]["ci95"][0] <= 1.15 * h_true <= b1["H"]["ci95"][1])
+    assert all(p["status"] != "changed" for k, p in b1.items() if k != "H")
+    assert all(p["filed_value"] == p["dyr_value"] for k, p in b1.items() if k != "H")
+    assert all(not ev["worse_beyond_noise"] for ev in u["B1_G1"]["per_event"])
+    assert u["B1_G1"]["outcome"] == "changed H"
     cal = jd.read_dyr(tmp_path / "val" / "calibrated.dyr")
     genrou = [r for r in cal.records if r.model == "GENROU" and r.bus == 1]
     assert len(genrou) == 1 and genrou[0]["H"] == pytest.approx(b1["H"]["calibrated_value"], rel=1e-5)
+    assert genrou[0]["D"] == 0.0
     # the round trip: the fleet on the case plus the calibrated records
     fleet_text = path.read_text().replace('dyr = "case.dyr"', 'dyr = ["case.dyr", "val/calibrated.dyr"]')
     (tmp_path / "again.toml").write_text(fleet_text)

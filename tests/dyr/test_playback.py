@@ -384,3 +384,40 @@ def test_long_run_covariance_of_white_and_ar1_scores(rng):
     s, lag = long_run_covariance(x[..., None], 0.8, 20000.0)
     assert 20 < lag < 200
     assert s[0, 0] / x.size == pytest.approx(25.0, rel=0.2)
+
+
+def test_calibration_changes_only_what_the_events_reject(monkeypatch):
+    """The decision of ``calibrate_where_rejected`` (the fit stubbed): a parameter whose .dyr
+    value lies inside its interval is put back; a change within the noise is not filed; a
+    change that makes one event worse beyond the noise is refused."""
+    from jaxdse._dyr import calibrate as cmod
+
+    specs = (ParameterSpec("machine", "h_s", "H", 1.0, 10.0),
+             ParameterSpec("machine", "d_pu", "D", 0.0, 20.0, positive=False))
+    fits = []
+
+    def fake_fit(unit, free, events, settings, cal):
+        fits.append([s.label for s in free])
+        x0 = np.array([{"H": 5.0, "D": 0.0}[s.label] for s in free])
+        x = np.array([{"H": 4.0, "D": 0.01}[s.label] for s in free])
+        half = np.array([{"H": 0.1, "D": 0.05}[s.label] for s in free])   # H rejected, D not
+        return cmod.Calibration([s.label for s in free], x0, x, np.stack([x - half, x + half], 1),
+                                None, None, 0.0, 0, np.zeros(2), True, "fitted", tuple(free))
+
+    costs = {"dyr": np.array([50.0, 40.0]), "fitted": np.array([10.0, 39.0])}
+    monkeypatch.setattr(cmod, "calibrate", fake_fit)
+    monkeypatch.setattr(cmod, "noise_level", lambda events, floor: np.ones(2))
+    monkeypatch.setattr(cmod, "_event_costs", lambda unit, events, sigma, settings: costs[unit])
+    d = cmod.calibrate_where_rejected("dyr", specs, None)
+    assert fits == [["H", "D"], ["H"]]                      # D put back, H fitted again alone
+    assert d.changed == ["H"] and d.unit == "fitted" and d.refused is None
+    assert d.status == {"H": "changed", "D": "consistent with the .dyr"}
+    assert d.threshold == pytest.approx(3.841, rel=1e-3)  # chi-square(1), 95 %, white residuals
+    costs["fitted"] = np.array([48.0, 40.5])                # gain 1.5: within the noise
+    d = cmod.calibrate_where_rejected("dyr", specs, None)
+    assert d.changed == [] and d.unit == "dyr" and "within the noise" in d.status["H"]
+    costs["fitted"] = np.array([1.0, 45.0])                 # event 2 worse by 5 > 3.84: refused
+    d = cmod.calibrate_where_rejected("dyr", specs, None)
+    assert d.changed == [] and d.unit == "dyr" and "event(s) 2 worse" in d.refused
+    assert np.array_equal(d.cost_after, d.cost_before)
+    assert cmod.noise_threshold(2, 0.5) == pytest.approx(5.991 * 3.0, rel=1e-3)

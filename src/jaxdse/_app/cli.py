@@ -226,17 +226,21 @@ records are played back against the recordings (the recorded terminal voltage im
 PLBVFU1 convention), their parameters ranked by how well these events identify them
 (normalised sensitivities of P and Q by forward-mode autodiff; Fisher information:
 Cramer-Rao half-widths, variance inflation), and the identifiable ones calibrated on all
-events jointly by bounded Levenberg-Marquardt, with 95 % intervals. Parameters the events
-cannot identify stay at their .dyr value, and the page says so.
+events jointly by bounded Levenberg-Marquardt (the same integrator as the playback), with
+95 % intervals. Parameters the events cannot identify stay at their .dyr value, and the page
+says so. A calibration never makes the model worse: a parameter changes in calibrated.dyr only
+where the events reject its .dyr value (outside its 95 % interval) and the joint error falls by
+more than the noise; one that would make any event worse beyond the noise is refused, and the
+page and console say why; otherwise the record is "consistent with the .dyr".
 
 CONFIG.toml is a fleet file (see `jaxdse fleet --help`) with, optionally:
   [calibrate]    events = ["line_trip.csv", ...]   more recordings of the same plants (same
                    columns as [measurement]); all events are fitted jointly
                  parameters = ["H", "KA", "R"]     default: H, D, the exciter's main gain and
                    time constant, the governor's droop (IEEEG1: K) and main time constant
-                 bounds = {H = [2.0, 8.0], KA = [10, 400]}   default [x/4, 4x]; D [-5, 20]
+                 bounds = {H = [2.0, 8.0], KA = [10, 400]}   default [x/4, 4x]; D [0, 20]
                  max_relative_ci (0.05) calibrate only what the events fix within +-5 %
-                 noise_floor_pu (0.001), bound_factor (4), substeps (2: steps per frame in the fit)
+                 noise_floor_pu (0.001), bound_factor (4)
                  model_error (0.01)  the .dyr playback's own relative error, added to the
                    intervals of positive parameters (noise alone covers H in 78 % on the bench)
                  input_filter_hz (0: off)  low-pass the imposed voltage inside the fit (PMU
@@ -245,8 +249,9 @@ CONFIG.toml is a fleet file (see `jaxdse fleet --help`) with, optionally:
 
 DIR gets:
   DIR/report.html, DIR/units/<name>.html   per unit: P/f and Q/V overlays of the measurement,
-                 the .dyr model (before) and the calibrated model (after), per event; the
-                 sensitivity ranking; calibrated values with 95 % intervals against the .dyr
+                 the .dyr model (before) and the calibrated model (after), per event, with
+                 residual panels; the error before and after by event; the sensitivity
+                 ranking; fitted values with 95 % intervals, and what was filed and why
   DIR/calibrated.dyr    only the changed records, PSS/E syntax (read back by jaxdse)
   DIR/validate.json     everything above as numbers
 

@@ -53,7 +53,8 @@ def run_demo(out_dir: Path, duration_s: float = 600.0, seed: int = 0, log=sys.st
         truth = sims[name].truth
         entries.append(summary_entry(name, a, a2_reference=truth.a2, h_reference_s=plant.machine.h_s))
         write_estimates_csv(out_dir / f"estimates_{name}.csv", a.estimate, a.replay)
-        plot_estimates(a.estimate, name, out_dir, a1_reference=truth.a1, a2_reference=truth.a2,
+        plot_estimates(a.estimate, name, out_dir, float(plant.machine.omega_s), a1_reference=truth.a1,
+                       a2_reference=truth.a2, onset_s=scenarios[name].events[0].time_s,
                        ident=a.identified, rep=a.replay, status=entries[-1]["verdict"])
     write_summary(out_dir / "summary.json", entries,
                   {"source": "jaxdse demo: simulated plant (jaxdse.simulate), truth known",

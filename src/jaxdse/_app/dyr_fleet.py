@@ -69,7 +69,8 @@ class CalibrateOptions:
     """PSS/E names of the parameters to rank and calibrate (e.g. ["H", "KA", "R"]); empty: H, D,
     the exciter's main gain and time constant, the governor's droop and main time constant."""
     bounds: dict = dataclasses.field(default_factory=dict)
-    """{PSS/E name: [lower, upper]}: the engineer's bounds; others get [x/4, 4x] (D: [-5, 20])."""
+    """{PSS/E name: [lower, upper]}: the engineer's bounds; others get the physical ones
+    [x/4, 4x] (time constants and gains keep their sign) and D [0, 20]."""
     bound_factor: float = 4.0
     """Default bounds of a positive parameter: [x / factor, x * factor]."""
     max_relative_ci: float = 0.05
@@ -80,9 +81,6 @@ class CalibrateOptions:
     model_error: float = 0.01
     """Relative error of the .dyr playback against the plant [-], added in quadrature to each
     positive parameter's 95 % half-width (see ``jaxdse.CalibrationSettings``)."""
-    substeps: int = 2
-    """Fixed steps per frame of the playbacks inside the fit (the before/after playbacks use
-    [playback] substeps)."""
     input_filter_hz: float = 0.0
     """Inside the fit, low-pass the imposed |V| and angle at this cut-off [Hz] (zero phase,
     detected switching steps kept sharp; 0: off). Noise on the recorded voltage drives the

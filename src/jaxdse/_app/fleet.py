@@ -33,7 +33,7 @@ from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_pla
 from .fleet_file import Fleet, FleetPlant, load_fleet
 from .fleet_report import write_report
 from .progress import Progress
-from .report import summary_entry
+from .report import playback_traces, summary_entry
 from .run import module_values, settings_values, sha256
 from .windows import WindowCriteria, window_scores
 
@@ -250,15 +250,10 @@ def _pct(x):
 def _traces(est, rep, dyr: DyrOutcome | None = None) -> dict:
     """Measured and played-back x2, I_t, P_t, Q_t for the unit page (host arrays): the
     surrogate's playback, or the .dyr model's where ``dyr`` has one."""
-    tr = est.trajectories
-    pb = rep.playback if rep is not None else tr.playback
-    out = {"time_s": np.asarray(est.time_s)}
-    for k, meas, sim in (("x2", tr.x2_meas_rad_s, pb.x2_rad_s), ("I_t", tr.i_t_pu, pb.i_t_pu),
-                         ("P_t", tr.p_t_pu, pb.p_t_pu), ("Q_t", tr.q_t_pu, pb.q_t_pu)):
-        out[k] = (np.asarray(meas), np.asarray(sim))
+    out = playback_traces(est, rep)
     if dyr is not None and dyr.playback is not None:
         d = dyr.playback
-        v = np.asarray(tr.v_t_pu)
+        v = np.asarray(est.trajectories.v_t_pu)
         i_t = np.hypot(d.p_pu, d.q_pu) / np.where(v > 0, v, 1.0)
         for k, sim in (("x2", d.x2_rad_s), ("I_t", i_t), ("P_t", d.p_pu), ("Q_t", d.q_pu)):
             out[k] = (out[k][0], np.asarray(sim))

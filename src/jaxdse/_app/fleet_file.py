@@ -212,7 +212,7 @@ def calibrate_section(path: Path, table: dict) -> CalibrateOptions:
             raise InputError(path, f"must be [lower, upper] with lower < upper, got {b!r}",
                              key=f"calibrate.bounds.{k}")
     kw = options(path, CalibrateOptions, table, "calibrate.",
-                 keys={"bound_factor", "max_relative_ci", "noise_floor_pu", "substeps",
+                 keys={"bound_factor", "max_relative_ci", "noise_floor_pu",
                        "input_filter_hz", "model_error"})
     return build(path, CalibrateOptions, {**kw, "events": tuple(files), "parameters": tuple(names),
                                           "bounds": {k: tuple(map(float, b)) for k, b in bounds.items()}},

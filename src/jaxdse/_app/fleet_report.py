@@ -30,6 +30,7 @@ th{background:#f0f0f0;cursor:pointer} td:first-child,th:first-child{text-align:l
 .v{color:#fff;padding:1px 6px;border-radius:3px;white-space:nowrap}
 .fail{color:#b00;font-weight:bold} .pass{color:#070}
 img{max-width:100%} .small{font-size:12px;color:#555}
+.datawarn{border-left:4px solid #c80;background:#fff8e6;padding:.3em .8em;margin:.8em 0;font-size:13px}
 """
 
 SORT_JS = """
@@ -59,7 +60,7 @@ def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -
         playback = PlaybackFigure()
         try:
             for e in units:
-                playback.draw(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
+                playback.draw_unit(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
         finally:
             playback.close()
     for e in units:
@@ -115,8 +116,8 @@ class PlaybackFigure:
     measurement) in a panel below, the event window shaded where one was found: one figure
     whose lines are redrawn for each unit (a new figure's axes took ~40 % of its time)."""
 
-    LABELS = {"x2": "speed deviation\nx2 [rad/s]", "I_t": "current I_t [pu]",
-              "P_t": "active power\nP_t [pu]", "Q_t": "reactive power\nQ_t [pu]"}
+    LABELS = {"x2": ("speed deviation\nx2", "rad/s"), "I_t": ("current I_t", "pu"),
+              "P_t": ("active power\nP_t", "pu"), "Q_t": ("reactive power\nQ_t", "pu")}
 
     def __init__(self):
         plt = _plt()
@@ -133,26 +134,30 @@ class PlaybackFigure:
             res, = rax.plot([], [], lw=0.8, color="tab:red")
             rax.axhline(0.0, color="k", lw=0.5)
             self.res_lines.append(res)
-            ax.set_ylabel(self.LABELS[k], fontsize=8)
-            rax.set_ylabel("sim − meas", fontsize=7)
+            label, unit = self.LABELS[k]
+            ax.set_ylabel(f"{label} [{unit}]", fontsize=8)
+            rax.set_ylabel(f"sim − meas\n[{unit}]", fontsize=7)
             rax.tick_params(labelsize=7)
             for a in (ax, rax):
                 a.grid(alpha=0.3)
         handles = [self.lines[0][0], self.lines[0][1]]
         self.legend = self.axes[0].legend(handles=handles, loc="upper right", fontsize=8)
         self.xlabel = self.res_axes[-1].set_xlabel("")
-        self.title = self.fig.suptitle("", fontsize=10)
+        self.title = self.fig.suptitle("", fontsize=9)
         # fixed margins: tight_layout measures every tick label and took 0.3 s of 0.4 s per unit
         self.fig.subplots_adjust(left=0.12, right=0.98, bottom=0.05, top=0.94, hspace=0.15)
 
-    def draw(self, e: dict, tr: dict, path: Path) -> None:
-        """Draw unit ``e``'s traces ``tr`` and save the figure to ``path``."""
+    def draw(self, tr: dict, path: Path, title: str, sim_label: str, onset_s: float | None,
+             event_s: float, xlim: tuple[float, float] | None = None) -> None:
+        """Draw the traces ``tr`` ({"time_s": t, channel: (measured, simulated)}) and save the
+        figure to ``path``; the event window [onset, onset + event_s] is shaded where an event
+        was found (``onset_s`` not None), and the title says whether the recording is ambient.
+        ``xlim``: only that time span (a zoom; the y-axes fit it)."""
         t = tr["time_s"]
-        val = e["validation"]
-        pw = val["windows"] or {}
-        t_event = pw.get("onset_s")
-        event = (pw.get("windows") or {}).get("event", (0, 0))
-        event_s = (event[1] - event[0]) * (t[1] - t[0])
+        if xlim is not None:
+            keep = (t >= xlim[0]) & (t <= xlim[1])
+            tr = {k: v[keep] if k == "time_s" else (v[0][keep], v[1][keep]) for k, v in tr.items()}
+            t = tr["time_s"]
         for j, k in enumerate(self.LABELS):
             meas, sim = tr[k]
             line_m, line_s = self.lines[j]
@@ -162,11 +167,12 @@ class PlaybackFigure:
             for i, ax in ((2 * j, self.axes[j]), (2 * j + 1, self.res_axes[j])):
                 if self.spans[i] is not None:
                     self.spans[i].remove()
-                self.spans[i] = (ax.axvspan(t_event, t_event + event_s, color="tab:blue", alpha=0.08)
-                                 if t_event is not None else None)
+                self.spans[i] = (ax.axvspan(onset_s, onset_s + event_s, color="tab:blue", alpha=0.08)
+                                 if onset_s is not None else None)
                 ax.set_autoscaley_on(True)
                 ax.relim()
                 ax.autoscale_view()
+                ax.set_xlim(float(t[0]), float(t[-1]))
             fin = meas[np.isfinite(meas)]
             if fin.size:
                 lo, hi = float(fin.min()), float(fin.max())
@@ -174,14 +180,22 @@ class PlaybackFigure:
                 sim_f = sim[np.isfinite(sim)]
                 if sim_f.size and (sim_f.min() < lo - 4 * pad or sim_f.max() > hi + 4 * pad):
                     self.axes[j].set_ylim(lo - 4 * pad, hi + 4 * pad)
-        self.legend.get_texts()[1].set_text(_sim_label(e))
-        kind = ("time [s] (shaded: event window)" if t_event is not None
-                else "time [s] (ambient recording: no disturbance found, no event window)")
-        self.xlabel.set_text(kind)
-        head = "disturbance recording" if t_event is not None else "ambient recording"
-        self.title.set_text(f"{e['name']}, {head}: measured and simulated\nH: {e['verdict']} · model "
-                            f"validation ({MODEL_NAMES[val['model']]}): {val['result']}")
+        self.legend.get_texts()[1].set_text(sim_label)
+        self.xlabel.set_text("time [s] (shaded: event window)" if onset_s is not None
+                             else "time [s] (ambient recording: no disturbance found, no event window)")
+        head = "disturbance recording" if onset_s is not None else "ambient recording"
+        self.title.set_text(f"{title}, {head}: measured and simulated")
         self.fig.savefig(path, dpi=90)
+
+    def draw_unit(self, e: dict, tr: dict, path: Path) -> None:
+        """A fleet unit's figure: its validation's event window, both results in the title."""
+        val = e["validation"]
+        pw = val["windows"] or {}
+        event = (pw.get("windows") or {}).get("event", (0, 0))
+        t = tr["time_s"]
+        self.draw(tr, path, f"{e['name']} (H: {e['verdict']} · model validation, "
+                  f"{MODEL_NAMES[val['model']]}: {val['result']})", _sim_label(e), pw.get("onset_s"),
+                  (event[1] - event[0]) * (t[1] - t[0]))
 
     def close(self) -> None:
         _plt().close(self.fig)
@@ -357,6 +371,11 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     fallbacks = ("<p><b>Plant data fallbacks</b> (the .dyr records as read, and what jaxdse did):</p><ul>"
                  + "".join(f"<li>{html.escape(f)}</li>" for f in e.get("fallbacks", [])) + "</ul>"
                  if e.get("fallbacks") else "")
+    warnings = e.get("data_warnings") or []
+    data_warnings = ('<div class="datawarn"><b>Data warnings</b> (odd values in the records, used as '
+                     "given: their equations can be evaluated, as PSS/E simulates them):<ul>"
+                     + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul></div>"
+                     if warnings else "")
     why = {"identified": "The recording determines H to within ±10 % at 95 % confidence.",
            "weakly identified": "An estimate is given, but it is not tight enough to file as identified:",
            "not identified": "The recording does not tell H apart; the number is not usable:",
@@ -416,6 +435,7 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
 <p>Bus {e['bus']} ({e['bus_kv']:g} kV), {e['s_mva']:.0f} MVA, {len(e['units'])} unit(s);
 governor model(s): {html.escape(', '.join(e['governor_models']))}; PMU at the
 {'machine terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
+{data_warnings}
 <p>Two separate results: what the recording says about the inertia H, and whether the
 played-back model matches the recorded response. Neither implies the other.</p>
 <h2>Inertia H: {_badge(e['verdict'])}</h2><p>{why}</p>{f'<ul>{reasons}</ul>' if reasons else ''}

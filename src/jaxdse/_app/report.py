@@ -94,6 +94,8 @@ def summary_entry(name: str, assessment: Assessment | Estimate, a2_reference=Non
         "a1": _num(final.a1), "a2": _num(final.a2), "H_s": _num(final.h_s), "D": _num(final.d_pu_s),
         "H_ci95": _pair(ident.h_ci95) if ident is not None else None,
         "D_ci95": _pair(ident.d_ci95) if ident is not None else None,
+        # D in the GENROU record's convention [pu torque per pu speed]: D w_s = 2 H a1
+        "D_genrou": _num(2.0 * final.h_s * final.a1),
         "a2_reference": _num(a2_reference) if a2_reference is not None else None,
         "H_reference_s": _num(h_reference_s) if h_reference_s is not None else None,
         "a2_error_percent": (_num(100 * (final.a2 - a2_reference) / abs(a2_reference))
@@ -131,6 +133,13 @@ def _reason_text(key: str, ident, online: dict) -> str:
         g = float(ident.governor_gain_error)
         return (f"the data ask for a governor response {abs(100 * g):.0f} % "
                 f"{'below' if g < 0 else 'above'} the model's")
+    if key == "power_above_droop" and ident is not None:
+        k = 1.0 + float(ident.governor_gain_error)
+        cause = ("a current logged as peak instead of RMS (x1.414)?" if abs(k - 2**0.5) < 0.12
+                 else "a CT ratio or a base?")
+        return (f"the measured power answers the frequency {k:.2f}x as strongly as the governor's "
+                f"droop allows (governor correction {100 * (k - 1):+.0f} %): if the governor data are "
+                f"right, the power and H are {k:.2f}x too large: {cause}")
     if key == "negative_damping" and ident is not None:
         return (f"D = {float(ident.d_pu_s):.3g} < 0 with 95 % confidence: the 3rd-order model lumps the "
                 "excitation and stabiliser damping into D")
@@ -204,48 +213,68 @@ def format_table(entries: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def plot_estimates(est: Estimate, name: str, out_dir: Path, a1_reference=None, a2_reference=None,
-                   ident: Identified | None = None, rep: Replay | None = None,
-                   status: str | None = None) -> list[Path]:
-    """Figures like the paper's Figs. 5-8: convergence, x2, playback. Returns the paths.
+def plot_estimates(est: Estimate, name: str, out_dir: Path, omega_s: float, a1_reference=None,
+                   a2_reference=None, ident: Identified | None = None, rep: Replay | None = None,
+                   status: str | None = None, onset_s: float | None = None) -> list[Path]:
+    """Figures like the paper's Figs. 5-8: H and D over time, x2, playback (the whole record,
+    and 30 s around the event where there is one). Returns the paths.
 
-    ``status`` (the verdict and its main reason) goes into every title, so that a figure of a
-    failed or unidentified unit says so.
+    ``omega_s``: synchronous speed [rad/s] (H = omega_s / (2 a2), D = a1 / a2). ``status`` (the
+    verdict and its main reason) goes into every title, so that a figure of a failed or
+    unidentified unit says so. ``onset_s``: the event's time where it is known (a simulation);
+    else it is looked for in P and Q as the fleet's validation does.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .fleet_report import PlaybackFigure
+    from .windows import WindowCriteria, event_start
+
     t = np.asarray(est.time_s)
     tag = f" — {status}" if status else ""
     paths = []
 
-    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
-    for ax, traj, ref, label, k in ((axes[0], est.a1_hat, a1_reference, "a1 [1/s]", 0),
-                                    (axes[1], est.a2_hat, a2_reference, "a2 [rad/s² per pu]", 1)):
-        ax.plot(t, np.asarray(traj), label="online estimate (DREM)")
+    a1_hat, a2_hat = np.asarray(est.a1_hat), np.asarray(est.a2_hat)
+    ok = a2_hat > 0
+    h_online = np.where(ok, omega_s / (2.0 * np.where(ok, a2_hat, 1.0)), np.nan)
+    d_online = np.where(ok, a1_hat / np.where(ok, a2_hat, 1.0), np.nan)
+    h_ref = None if a2_reference is None else omega_s / (2.0 * float(a2_reference))
+    d_ref = None if a1_reference is None or a2_reference is None else float(a1_reference) / float(a2_reference)
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5.5))
+    for ax, online, ref, label, k in ((axes[0], h_online, h_ref, "inertia H [s]", "h"),
+                                      (axes[1], d_online, d_ref, "damping D [pu torque / (rad/s)]", "d")):
+        ax.plot(t, online, label="online estimate (DREM/I&I)")
+        scale = [abs(x) for x in (ref,) if x is not None]
         if ident is not None:
-            value = float(ident.a1 if k == 0 else ident.a2)
-            se = float(ident.se_a1 if k == 0 else ident.se_a2)
-            ax.axhline(value, color="tab:red", lw=1.2, label="batch identification")
-            ax.axhspan(value - 1.96 * se, value + 1.96 * se, color="tab:red", alpha=0.15,
-                       label="95 % interval")
+            value = float(ident.h_s if k == "h" else ident.d_pu_s)
+            lo, hi = (float(x) for x in (ident.h_ci95 if k == "h" else ident.d_ci95))
+            ax.axhline(value, color="tab:red", lw=1.2, label=f"batch identification ({value:.3g})")
+            if np.isfinite(lo) and np.isfinite(hi):
+                ax.axhspan(lo, hi, color="tab:red", alpha=0.15, label="its 95 % interval")
+            scale += [abs(x) for x in (value, lo, hi) if np.isfinite(x)]
         if ref is not None:
-            ax.axhline(float(ref), color="k", ls="--", label="reference")
-        ax.set_ylabel(label)
-        ax.legend(loc="best", fontsize=8)
+            ax.axhline(ref, color="k", ls="--", label=f"reference ({ref:.3g})")
+        if scale and k == "h":                 # the online transient would hide the answer
+            ax.set_ylim(0.0, 2.0 * max(scale))
+        elif scale:
+            top = 2.0 * max(scale) + 1e-3
+            ax.set_ylim(-top, top)
+        ax.set_ylabel(label, fontsize=9)
+        ax.legend(loc="best", fontsize=7)
         ax.grid(alpha=0.3)
     if bool(est.converged):
-        axes[1].axvline(float(est.convergence_time_s), color="g", ls=":", label="converged")
+        axes[0].axvline(float(est.convergence_time_s), color="g", ls=":", label="converged")
     axes[1].set_xlabel("time [s]")
-    fig.suptitle(f"Parameter estimates — {name}{tag}", fontsize=10)
+    fig.suptitle(f"Inertia and damping: online estimate and batch identification — {name}{tag}",
+                 fontsize=10)
     paths.append(_save(fig, out_dir / f"convergence_{name}.png"))
 
     tr = est.trajectories
     fig, axes = plt.subplots(2, 1, sharex=True, figsize=(8, 5))
-    axes[0].plot(t, np.asarray(tr.x2_meas_rad_s), label="measured", lw=0.8)
-    axes[0].plot(t, np.asarray(tr.x2_hat_rad_s), label="I&I observer", lw=0.8)
+    axes[0].plot(t, np.asarray(tr.x2_hat_rad_s), label="I&I observer", lw=1.6, color="tab:red", alpha=0.6)
+    axes[0].plot(t, np.asarray(tr.x2_meas_rad_s), label="measured", lw=0.8, color="k")
     axes[0].set_ylabel("x2 [rad/s]")
     axes[0].legend(loc="best", fontsize=8)
     axes[1].plot(t, np.asarray(tr.x2_hat_rad_s - tr.x2_meas_rad_s), lw=0.8)
@@ -256,22 +285,35 @@ def plot_estimates(est: Estimate, name: str, out_dir: Path, a1_reference=None, a
     fig.suptitle(f"Speed deviation x2, observer vs measurement — {name}{tag}", fontsize=10)
     paths.append(_save(fig, out_dir / f"x2_{name}.png"))
 
-    pb = _playback(est, rep)
-    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 8))
-    pairs = ((tr.x2_meas_rad_s, pb.x2_rad_s, "x2 [rad/s]"), (tr.i_t_pu, pb.i_t_pu, "I_t [pu]"),
-             (tr.p_t_pu, pb.p_t_pu, "P_t [pu]"), (tr.q_t_pu, pb.q_t_pu, "Q_t [pu]"))
-    for ax, (meas, sim, label) in zip(axes, pairs):
-        ax.plot(t, np.asarray(meas), lw=0.8, label="measured")
-        ax.plot(t, np.asarray(sim), lw=0.8, label="playback")
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-        _limit_to_measurement(ax, np.asarray(meas), np.asarray(sim))
-    axes[0].legend(loc="best", fontsize=8)
-    axes[-1].set_xlabel("time [s]")
-    which = "identified" if rep is not None else "online"
-    fig.suptitle(f"Event playback with the {which} H, D vs measurement — {name}{tag}", fontsize=10)
-    paths.append(_save(fig, out_dir / f"playback_{name}.png"))
+    traces = playback_traces(est, rep)
+    p_meas, q_meas = traces["P_t"][0], traces["Q_t"][0]
+    criteria = WindowCriteria()
+    onset = onset_s if onset_s is not None else event_start(
+        traces["time_s"], [p_meas, q_meas], threshold=criteria.onset_threshold)
+    label = f"simulated (3rd-order model, {'identified' if rep is not None else 'online'} H and D)"
+    figure = PlaybackFigure()
+    try:
+        paths.append(out_dir / f"playback_{name}.png")
+        figure.draw(traces, paths[-1], f"{name}{tag}", label, onset, criteria.event_s)
+        if onset is not None:
+            paths.append(out_dir / f"playback_{name}_event.png")
+            figure.draw(traces, paths[-1], f"{name}{tag}, 30 s around the event", label, onset,
+                        criteria.event_s, xlim=(onset - 5.0, onset + 25.0))
+    finally:
+        figure.close()
     return paths
+
+
+def playback_traces(est: Estimate, rep: Replay | None = None) -> dict:
+    """Measured and played-back x2, I_t, P_t, Q_t (host arrays): {"time_s": t, channel:
+    (measured, simulated)}, the replay with the identified H and D where ``rep`` has one."""
+    tr = est.trajectories
+    pb = _playback(est, rep)
+    out = {"time_s": np.asarray(est.time_s)}
+    for k, meas, sim in (("x2", tr.x2_meas_rad_s, pb.x2_rad_s), ("I_t", tr.i_t_pu, pb.i_t_pu),
+                         ("P_t", tr.p_t_pu, pb.p_t_pu), ("Q_t", tr.q_t_pu, pb.q_t_pu)):
+        out[k] = (np.asarray(meas), np.asarray(sim))
+    return out
 
 
 def _limit_to_measurement(ax, meas, sim):

@@ -68,7 +68,8 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
         if cfg.trajectories:
             write_estimates_csv(out_dir / f"estimates_{u.name}.csv", est, rep)
         if cfg.figures:
-            plot_estimates(est, u.name, out_dir, a2_reference=g.a2_reference, ident=ident, rep=rep,
+            plot_estimates(est, u.name, out_dir, float(u.plant.machine.omega_s), a2_reference=g.a2_reference,
+                           ident=ident, rep=rep,
                            status=status)
         progress.step(f"wrote {u.name}")
     summary = {

@@ -11,10 +11,13 @@ The file is a fleet file (``[case]``, ``[measurement]``, ``[channels]`` or ``[[u
    Fisher information each parameter's Cramer-Rao 95 % half-width and variance inflation;
    parameters these events cannot pin down within ``max_relative_ci`` stay at their .dyr value
    and the page says so;
-3. calibrated: the identifiable ones by bounded Levenberg-Marquardt on all events jointly, with
-   95 % intervals (Gauss-Newton: the residuals' long-run covariance, the imposed voltage's
-   noise drawn again through the fitted model, the events' disagreement, and ``model_error``;
-   see :mod:`jaxdse._dyr.calibrate`): the *after* playback.
+3. calibrated: the identifiable ones by bounded Levenberg-Marquardt on all events jointly (the
+   playback's own integrator settings), with 95 % intervals (Gauss-Newton: the residuals'
+   long-run covariance, the imposed voltage's noise drawn again through the fitted model, the
+   events' disagreement, and ``model_error``; see :mod:`jaxdse._dyr.calibrate`);
+4. filed only where the events reject the .dyr value (outside its interval) and the joint
+   error falls by more than the noise, and never when an event gets worse beyond the noise
+   (:func:`~jaxdse._dyr.calibrate.calibrate_where_rejected`): the *after* playback.
 
 Writes validate.json, report.html (with units/<name>.html and .png: P/f and Q/V overlays before
 and after) and calibrated.dyr (only the changed records, PSS/E syntax).
@@ -28,6 +31,7 @@ import json
 import math
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 import jax
@@ -38,7 +42,7 @@ from .._core.front_end import front_end
 from .._dyr.calibrate import (
     CalibrationSettings,
     ParameterSpec,
-    calibrate,
+    calibrate_where_rejected,
     rank,
     stack_events,
 )
@@ -53,6 +57,7 @@ from .._models.stabilisers import STABILISER_FIELDS
 from .._version import __version__
 from .dyr_fleet import plant_model, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
+from .fleet_report import _page
 from .progress import Progress
 
 DEFAULT_PARAMETERS = {
@@ -71,8 +76,8 @@ DEFAULT_PARAMETERS = {
 }
 """The default parameter set per model: H and D, the exciter's main gain and time constant, the
 governor's droop (IEEEG1: its gain K = 1/R) and main time constant."""
-D_BOUNDS = (-5.0, 20.0)
-"""Default bounds of D [pu torque / pu speed]: it may sit at 0 in the .dyr."""
+D_BOUNDS = (0.0, 20.0)
+"""Default bounds of D [pu torque / pu speed]: physical (D >= 0), and it may sit at 0 in the .dyr."""
 
 
 # --- parameters -------------------------------------------------------------------------------
@@ -150,11 +155,11 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     recordings += [(str(e),) for e in opts.events]
     files = [" + ".join(r) for r in recordings]
     playback = PlaybackSettings(substeps=fleet.playback.substeps, solver=fleet.playback.solver)
-    fit_settings = PlaybackSettings(substeps=opts.substeps, solver=fleet.playback.solver,
+    fit_settings = PlaybackSettings(substeps=playback.substeps, solver=playback.solver,
                                     input_filter_hz=opts.input_filter_hz)
     cal = CalibrationSettings(max_relative_ci=opts.max_relative_ci,
                               noise_floor_pu=opts.noise_floor_pu, model_error=opts.model_error)
-    progress = Progress(len(fleet.plants), stream)
+    progress = Progress(len(fleet.plants) * (len(recordings) + 3), stream)
     tables, units, changed = {}, [], []
     for p in fleet.plants:
         entry = {"name": p.name, "bus": p.bus, "events": files}
@@ -164,33 +169,46 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
                                                "`jaxdse fleet`, not calibrated (their shares are not "
                                                "measured)")
             units.append(entry)
+            progress.done += len(recordings) + 2
             progress.step(f"{p.name}: skipped")
+            print(f"jaxdse: warning: {p.name}: not validated: {entry['skipped']}", file=stream)
             continue
         um = pm.units[0]
+        series = []
         try:
-            series = [_event_series(fleet, p, r, tables) for r in recordings]
+            for r in recordings:
+                series.append(_event_series(fleet, p, r, tables))
+                progress.step(f"{p.name}: read {Path(r[0]).name}")
         except InputError as err:
             entry["skipped"] = str(err)
             units.append(entry)
+            progress.done += len(recordings) + 2 - len(series)
             progress.step(f"{p.name}: skipped")
+            print(f"jaxdse: warning: {p.name}: not validated: {err}", file=stream)
             continue
         events = _pad(series)
         notes = list(um.notes)
         specs = parameter_specs(um.unit, um.models, opts, notes)
         ranking = rank(um.unit, specs, events, fit_settings, cal)
         free = [s for s, ok in zip(specs, ranking.identifiable) if ok]
-        result = calibrate(um.unit, free, events, fit_settings, cal) if free else None
-        after_unit = result.unit if result is not None else um.unit
+        progress.step(f"{p.name}: ranked {len(specs)} parameter(s), {len(free)} identifiable")
+        decision = calibrate_where_rejected(um.unit, free, events, fit_settings, cal) if free else None
+        progress.step(f"{p.name}: " + ("nothing identifiable" if decision is None else
+                                       f"changed {', '.join(decision.changed) or 'nothing'}"))
+        after_unit = um.unit if decision is None else decision.unit
         before = [jax.tree.map(np.asarray, jax.jit(play_back)(um.unit, s, playback)) for s in series]
         after = [jax.tree.map(np.asarray, jax.jit(play_back)(after_unit, s, playback)) for s in series]
-        entry.update(_unit_entry(um, specs, ranking, result, series, before, after, p))
+        entry.update(_unit_entry(um, specs, ranking, decision, series, before, after, p))
         entry["notes"] = notes
         units.append(entry)
-        if result is not None:
-            changed.append((p, um, free, result))
+        if decision is not None and decision.changed:
+            changed.append((p, um, decision))
         plot_before_after(entry, series, before, after, out_dir / "units" / f"{p.name}.png")
         (out_dir / "units" / f"{p.name}.html").write_text(unit_page(entry))
-        progress.step(f"{p.name}: " + ("calibrated" if result is not None else "nothing identifiable"))
+        progress.step(f"{p.name}: {entry['outcome']}")
+        if entry["outcome"] != "consistent with the .dyr":
+            print(f"jaxdse: {'warning' if entry['refused'] else 'note'}: {p.name}: {entry['outcome']}"
+                  + (f": {entry['refused']}" if entry["refused"] else ""), file=stream)
     dyr_text = calibrated_dyr(fleet, changed)
     (out_dir / "calibrated.dyr").write_text(dyr_text)
     doc = {"jaxdse_version": __version__, "config": str(fleet.path), "events": files,
@@ -199,9 +217,10 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
            "units": units, "wall_time_s": round(time.perf_counter() - t_start, 2)}
     (out_dir / "validate.json").write_text(json.dumps(doc, indent=1, default=_json) + "\n")
     (out_dir / "report.html").write_text(report_page(doc))
-    n_cal = sum(1 for u in units if u.get("calibrated"))
-    print(f"[jaxdse] {len(units)} plant(s), {n_cal} calibrated; wrote {out_dir}/report.html, "
-          f"validate.json, calibrated.dyr in {doc['wall_time_s']:.1f} s", file=stream)
+    outcomes = Counter(u.get("outcome", "skipped") for u in units)
+    print(f"[jaxdse] {len(units)} plant(s): " + ", ".join(f"{k} {n}" for k, n in outcomes.items())
+          + f"; wrote {out_dir}/report.html, validate.json, calibrated.dyr in {doc['wall_time_s']:.1f} s",
+          file=stream)
     return doc
 
 
@@ -218,37 +237,61 @@ def _rms(a, b) -> float:
     return float(100 * np.sqrt(np.mean(e ** 2)))
 
 
-def _unit_entry(um, specs, ranking, result, series, before, after, p) -> dict:
+def _unit_entry(um, specs, ranking, decision, series, before, after, p) -> dict:
     rows = []
-    fitted = {} if result is None else dict(zip(result.labels, zip(result.values, result.ci95)))
+    fits = {}
+    if decision is not None:
+        for fit in (decision.first_fit, decision.fit):      # the final fit wins for its parameters
+            if fit is not None:
+                fits.update(zip(fit.labels, zip(fit.values, fit.ci95)))
     for j, s in enumerate(specs):
-        row = {"parameter": s.label, "model": um.models[s.part], "dyr_value": float(s.value(um.unit)),
+        x0 = float(s.value(um.unit))
+        row = {"parameter": s.label, "model": um.models[s.part], "dyr_value": x0,
                "bounds": [s.lower, s.upper],
                "sensitivity_P_pu": float(ranking.sensitivity[j, 0]),
                "sensitivity_Q_pu": float(ranking.sensitivity[j, 1]),
                "relative_ci_percent_crlb": float(100 * ranking.relative_ci[j]),
                "variance_inflation": float(ranking.variance_inflation[j]),
                "identifiable": bool(ranking.identifiable[j]),
-               "why_not": ranking.reasons[j] or None}
-        if s.label in fitted:
-            v, ci = fitted[s.label]
+               "why_not": ranking.reasons[j] or None,
+               "status": "not identifiable: .dyr kept" if not ranking.identifiable[j] else
+               decision.status.get(s.label, "consistent with the .dyr"),
+               "filed_value": x0}
+        if s.label in fits:
+            v, ci = fits[s.label]
             row.update(calibrated_value=float(v), ci95=[float(ci[0]), float(ci[1])],
-                       change_percent=float(100 * (v - row["dyr_value"]) / row["dyr_value"])
-                       if row["dyr_value"] != 0 else None)
+                       change_percent=float(100 * (v - x0) / x0) if x0 != 0 else None)
+            if row["status"] == "changed":
+                row["filed_value"] = float(v)
         rows.append(row)
     per_event = []
-    for s, b, a in zip(series, before, after):
+    noise = None if decision is None else decision.threshold
+    for e, (s, b, a) in enumerate(zip(series, before, after)):
         p_meas, q_meas = _pq(s)
-        per_event.append({
-            "before_rms_percent_mbase": {"P_t": _rms(b.p_pu, p_meas), "Q_t": _rms(b.q_pu, q_meas)},
-            "after_rms_percent_mbase": {"P_t": _rms(a.p_pu, p_meas), "Q_t": _rms(a.q_pu, q_meas)}})
+        ev = {"before_rms_percent_mbase": {"P_t": _rms(b.p_pu, p_meas), "Q_t": _rms(b.q_pu, q_meas)},
+              "after_rms_percent_mbase": {"P_t": _rms(a.p_pu, p_meas), "Q_t": _rms(a.q_pu, q_meas)}}
+        if decision is not None:
+            cb, ca = float(decision.cost_before[e]), float(decision.cost_after[e])
+            ev.update(cost_before=cb, cost_after=ca, worse_beyond_noise=ca - cb > noise)
+        per_event.append(ev)
+    fit = None if decision is None else decision.fit
+    if decision is None:
+        outcome = "nothing identifiable"
+    elif decision.refused:
+        outcome = "calibration refused"
+    elif decision.changed:
+        outcome = "changed " + ", ".join(decision.changed)
+    else:
+        outcome = "consistent with the .dyr"
     return {"models": um.models, "parameters": rows, "per_event": per_event,
-            "calibrated": result is not None,
-            "converged": None if result is None else result.converged,
-            "residual_autocorrelation": None if result is None else result.autocorrelation,
-            "residual_bandwidth_frames": None if result is None else result.bandwidth_frames,
-            "voltage_noise": None if result is None else {
-                "ln_v_sd": float(result.voltage_noise[0]), "angle_sd_rad": float(result.voltage_noise[1])},
+            "outcome": outcome, "refused": None if decision is None else decision.refused,
+            "noise_threshold": noise,
+            "calibrated": bool(decision is not None and decision.changed),
+            "converged": None if fit is None else fit.converged,
+            "residual_autocorrelation": None if fit is None else fit.autocorrelation,
+            "residual_bandwidth_frames": None if fit is None else fit.bandwidth_frames,
+            "voltage_noise": None if fit is None else {
+                "ln_v_sd": float(fit.voltage_noise[0]), "angle_sd_rad": float(fit.voltage_noise[1])},
             "eigenvalues": ranking.eigenvalues.tolist(),
             "not_identifiable": [r for r in ranking.reasons if r]}
 
@@ -279,14 +322,18 @@ def _fmt(x) -> str:
 
 
 def calibrated_dyr(fleet: Fleet, changed) -> str:
-    """The changed records in PSS/E .dyr syntax (read back by :func:`jaxdse.read_dyr`)."""
+    """The changed records in PSS/E .dyr syntax (read back by :func:`jaxdse.read_dyr`): only the
+    parameters a :class:`~jaxdse._dyr.calibrate.Decision` changed."""
     lines = [f"@! jaxdse {__version__} calibrated records: {fleet.path.name}; unchanged records are "
              "not repeated"]
-    for p, um, specs, result in changed:
+    for p, um, decision in changed:
         recs = {r.kind if r.kind != "other" else _part_of(r.model): r
                 for r in fleet.dyr.unit_records(p.bus, um_id(p))}
+        fit = decision.fit
+        specs = {s.label: s for s in fit.specs}
         for part in ("machine", "exciter", "governor"):
-            mine = [(s, v) for s, v in zip(specs, result.values) if s.part == part]
+            mine = [(specs[lab], float(v)) for lab, v in zip(fit.labels, fit.values)
+                    if lab in decision.changed and specs[lab].part == part]
             if not mine or part not in recs:
                 continue
             rec = recs[part]
@@ -312,43 +359,63 @@ def _part_of(model: str) -> str:
 # --- pages ------------------------------------------------------------------------------------
 
 def plot_before_after(e: dict, series, before, after, path: Path) -> None:
-    """P/f and Q/V overlays: measured, the .dyr model (before) and the calibrated one (after)."""
+    """Per event (columns): P and Q, measured against the .dyr model (before) and the filed one
+    (after), each with its residual panel, and the imposed |V| and frequency."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     n = len(series)
-    fig, axes = plt.subplots(4, n, figsize=(5.2 * n, 9), sharex="col", squeeze=False)
+    ratios = [3, 1.2, 3, 1.2, 2, 2]
+    fig, axes = plt.subplots(6, n, figsize=(5.4 * n, 12), sharex="col", squeeze=False,
+                             gridspec_kw={"height_ratios": ratios})
+    same = not e.get("calibrated")
     for j, (s, b, a) in enumerate(zip(series, before, after)):
         t = np.asarray(s.t_s)
         p, q = _pq(s)
         th = np.unwrap(np.asarray(s.v_ang_rad))
         f_dev = np.gradient(th, t) / (2 * np.pi)
-        rows = [("P [pu]", p, b.p_pu, a.p_pu), ("Q [pu]", q, b.q_pu, a.q_pu),
-                ("|V| [pu] (imposed)", np.asarray(s.v_mag_pu), None, None),
-                ("f - f0 [Hz] (imposed)", f_dev, None, None)]
-        for i, (label, meas, bef, aft) in enumerate(rows):
-            ax = axes[i, j]
-            ax.plot(t, meas, color="k", lw=1.0, label="measured")
-            if bef is not None:
-                ax.plot(t, bef, color="tab:orange", lw=0.9, label=".dyr model (before)")
-                ax.plot(t, aft, color="tab:blue", lw=0.9, ls="--", label="calibrated (after)")
+        for i, (label, meas, bef, aft) in enumerate((("P [pu]", p, b.p_pu, a.p_pu),
+                                                     ("Q [pu]", q, b.q_pu, a.q_pu))):
+            ax, rax = axes[2 * i, j], axes[2 * i + 1, j]
+            ax.plot(t, bef, color="tab:orange", lw=1.8, alpha=0.6, label=".dyr model (before)")
+            if not same:
+                ax.plot(t, aft, color="tab:blue", lw=1.0, ls="--", label="calibrated (after)")
+            ax.plot(t, meas, color="k", lw=0.8, label="measured")
+            rax.plot(t, bef - meas, color="tab:orange", lw=0.8, label="before")
+            if not same:
+                rax.plot(t, aft - meas, color="tab:blue", lw=0.8, ls="--", label="after")
+            rax.axhline(0.0, color="k", lw=0.5)
             ax.set_ylabel(label)
+            rax.set_ylabel("model − meas. [pu]", fontsize=8)
+        for i, (label, y) in ((4, ("|V| [pu] (imposed)", np.asarray(s.v_mag_pu))),
+                              (5, ("f − f0 [Hz] (imposed)", f_dev))):
+            axes[i, j].plot(t, y, color="k", lw=0.8)
+            axes[i, j].set_ylabel(label, fontsize=9)
+        for ax in axes[:, j]:
             ax.grid(alpha=0.3)
-        axes[0, j].set_title(Path(e["events"][j]).name, fontsize=9)
+        axes[0, j].set_title(f"event {j + 1}: {Path(e['events'][j]).name}", fontsize=9)
         axes[-1, j].set_xlabel("time [s]")
     axes[0, 0].legend(fontsize=8)
-    fig.suptitle(f"{e['name']}: the unit's .dyr model before and after calibration")
+    axes[1, 0].legend(fontsize=7)
+    what = "unchanged: the .dyr model is filed as it is" if same else "before and after calibration"
+    fig.suptitle(f"{e['name']}: the unit's .dyr model against the recordings, {what} "
+                 f"({e['outcome']})", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
 
 
-STYLE = ("body{font-family:sans-serif;max-width:1200px;margin:auto}"
-         "td,th{padding:2px 8px;border-bottom:1px solid #ddd}")
-
-
 def _f(x, spec=".4g") -> str:
     return "–" if x is None else format(x, spec)
+
+
+OUTCOME_COLOURS = {"consistent with the .dyr": "#1a9850", "calibration refused": "#d73027",
+                   "nothing identifiable": "#7f7f7f"}
+
+
+def _outcome_badge(outcome: str) -> str:
+    colour = OUTCOME_COLOURS.get(outcome, "#fdae61")          # "changed ...": orange
+    return f'<span class="v" style="background:{colour}">{html.escape(outcome)}</span>'
 
 
 def unit_page(e: dict) -> str:
@@ -360,38 +427,56 @@ def unit_page(e: dict) -> str:
         f"<td>{'yes' if r['identifiable'] else 'no'}</td>"
         f"<td>{_f(r.get('calibrated_value'))}</td>"
         f"<td>{' – '.join(_f(x) for x in r['ci95']) if r.get('ci95') else '–'}</td>"
-        f"<td>{_f(r.get('change_percent'), '+.1f')}</td></tr>"
+        f"<td>{_f(r['filed_value'])}</td><td>{html.escape(r['status'])}</td></tr>"
         for r in sorted(e["parameters"], key=lambda r: r["relative_ci_percent_crlb"]))
     ev = "".join(
-        f"<tr><td>{html.escape(Path(f).name)}</td>"
-        + "".join(f"<td>{_f(x[w][c], '.3f')}</td>"
-                  for w in ("before_rms_percent_mbase", "after_rms_percent_mbase") for c in ("P_t", "Q_t"))
+        f"<tr><td>{j + 1}: {html.escape(Path(f).name)}</td>"
+        + "".join(f"<td>{_f(x[w][c], '.3g')}</td>"
+                  for c in ("P_t", "Q_t") for w in ("before_rms_percent_mbase", "after_rms_percent_mbase"))
+        + (f"<td class=\"{'fail' if x.get('worse_beyond_noise') else 'pass'}\">"
+           f"{_f(x.get('cost_before'), '.3g')} → {_f(x.get('cost_after'), '.3g')}</td>")
         + "</tr>"
-        for f, x in zip(e["events"], e["per_event"]))
+        for j, (f, x) in enumerate(zip(e["events"], e["per_event"])))
     why = "".join(f"<li>{html.escape(w)}</li>" for w in e["not_identifiable"]) or "<li>none</li>"
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in e.get("notes", []))
     models = " / ".join(e["models"].get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>{html.escape(e['name'])}</title>
-<style>{STYLE}</style>
-</head><body><p><a href="../report.html">← all units</a></p>
-<h1>{html.escape(e['name'])}: model validation and calibration</h1>
-<p>Records: {html.escape(models)}. MOD-026-2 model validation: the recorded terminal voltage and
-frequency are imposed on the unit's own model; its active and reactive power are compared with
-the recording (the Transmission Planner sets the acceptance criteria).</p>
-<img src="{html.escape(e['name'])}.png" alt="P, Q, V, f: measured, before and after" style="max-width:100%">
-<h2>Playback error by event [% of MBASE, RMS]</h2>
-<table><tr><th>event</th><th>P before</th><th>Q before</th><th>P after</th><th>Q after</th></tr>{ev}</table>
+    words = {
+        "consistent with the .dyr": "The events do not reject the .dyr values: every identifiable "
+                                    "parameter's .dyr value lies inside its 95 % interval, or the fit "
+                                    "improves the error by no more than the noise. calibrated.dyr holds "
+                                    "nothing for this unit.",
+        "calibration refused": "The events ask for a change, but it would make an event worse beyond "
+                               "the noise: a model error, not a better value. Nothing was filed.",
+        "nothing identifiable": "These events identify none of the parameters; nothing was calibrated.",
+    }.get(e["outcome"], "The events reject the .dyr values of the parameters marked \"changed\" (outside "
+                        "their 95 % intervals), the joint error falls by more than the noise, and no "
+                        "event gets worse beyond it: calibrated.dyr holds the new values.")
+    refused = f"<p class=\"fail\">{html.escape(e['refused'])}</p>" if e.get("refused") else ""
+    body = f"""<p><a href="../report.html">← all units</a></p>
+<h1>{html.escape(e['name'])}: {_outcome_badge(e['outcome'])}</h1>
+<p>Records: {html.escape(models)}. NERC MOD-026-2 model validation: the recorded terminal voltage
+and frequency are imposed on the unit's own model; its active and reactive power are compared
+with the recording (the Transmission Planner sets the acceptance criteria).</p>
+<p>{words}</p>{refused}
+<img src="{html.escape(e['name'])}.png" alt="P and Q with residuals, V, f: measured, before and after">
+<h2>Playback error by event</h2>
+<p class="small">RMS error in % of MBASE; normalised cost: squared residuals of P and Q over
+their noise level, summed over the frames (the noise alone moves it by about
+{_f(e.get('noise_threshold'), '.3g')}; red: worse beyond that).</p>
+<table><tr><th>event</th><th>P before</th><th>P after</th><th>Q before</th><th>Q after</th>
+<th>normalised cost before → after</th></tr>{ev}</table>
 <h2>Sensitivity ranking and calibration</h2>
-<p>Sensitivity: RMS over the events of x·dP/dx and x·dQ/dx [pu]. Cramér-Rao half-width: how
-tightly these events can fix the parameter (95 %), all parameters free; variance inflation:
-how much the others blur it. Parameters above ±{_f(100 * 0.1, '.0f')} % are not calibrated.</p>
+<p class="small">Sensitivity: RMS over the events of x·dP/dx and x·dQ/dx [pu]. Cramér-Rao
+half-width: how tightly these events can fix the parameter (95 %), all parameters free;
+variance inflation: how much the others blur it. Fitted: the bounded least-squares value and
+its 95 % interval; filed: what calibrated.dyr holds (the .dyr value unless changed).</p>
 <table><tr><th>parameter</th><th>.dyr</th><th>sens. P</th><th>sens. Q</th><th>CRLB half-width</th>
-<th>variance inflation</th><th>identifiable</th><th>calibrated</th><th>95 % interval</th>
-<th>change [%]</th></tr>{rows}</table>
+<th>variance inflation</th><th>identifiable</th><th>fitted</th><th>95 % interval</th>
+<th>filed</th><th>status</th></tr>{rows}</table>
 <p>Not identifiable from these events (left at the .dyr value):</p><ul>{why}</ul>
 {f'<p>Notes:</p><ul>{notes}</ul>' if notes else ''}
-</body></html>
 """
+    return _page(f"{e['name']}: {e['outcome']}", body)
 
 
 def report_page(doc: dict) -> str:
@@ -399,25 +484,26 @@ def report_page(doc: dict) -> str:
     for u in doc["units"]:
         if "skipped" in u:
             rows.append(f"<tr><td>{html.escape(u['name'])}</td>"
-                        f"<td colspan=4>skipped: {html.escape(u['skipped'])}</td></tr>")
+                        f"<td colspan=5>skipped: {html.escape(u['skipped'])}</td></tr>")
             continue
         b = np.median([x["before_rms_percent_mbase"]["Q_t"] for x in u["per_event"]])
         a = np.median([x["after_rms_percent_mbase"]["Q_t"] for x in u["per_event"]])
-        cal = ", ".join(f"{r['parameter']} {_f(r['dyr_value'])}→{_f(r['calibrated_value'])}"
-                        for r in u["parameters"] if r.get("calibrated_value") is not None)
+        cal = ", ".join(f"{r['parameter']} {_f(r['dyr_value'])}→{_f(r['filed_value'])}"
+                        for r in u["parameters"] if r["status"] == "changed")
         name = html.escape(u["name"])
         rows.append(f"<tr><td><a href=\"units/{name}.html\">{name}</a></td>"
-                    f"<td>{b:.3f}</td><td>{a:.3f}</td><td>{html.escape(cal or 'nothing identifiable')}</td>"
+                    f"<td>{_outcome_badge(u['outcome'])}</td>"
+                    f"<td>{b:.3g}</td><td>{a:.3g}</td><td>{html.escape(cal or '–')}</td>"
                     f"<td>{len(u['not_identifiable'])}</td></tr>")
-    return f"""<!doctype html><html><head><meta charset="utf-8"><title>jaxdse validate</title>
-<style>{STYLE}</style>
-</head><body><h1>Model validation and calibration</h1>
-<p>{html.escape(doc['config'])}; events: {html.escape(', '.join(Path(e).name for e in doc['events']))};
-jaxdse {html.escape(doc['jaxdse_version'])}; {doc['wall_time_s']} s. The changed records are in
-<a href="calibrated.dyr">calibrated.dyr</a>.</p>
-<table><tr><th>unit</th><th>Q RMS error before [% MBASE, median over events]</th><th>after</th>
-<th>calibrated</th><th>parameters not identifiable</th></tr>{''.join(rows)}</table></body></html>
+    body = f"""<h1>Model validation and calibration</h1>
+<p class="small">{html.escape(doc['config'])}; events: {html.escape(', '.join(Path(e).name for e in doc['events']))};
+jaxdse {html.escape(doc['jaxdse_version'])}; {doc['wall_time_s']:.0f} s. The changed records are in
+<a href="calibrated.dyr">calibrated.dyr</a>: a parameter changes only where the events reject its
+.dyr value and the joint error falls by more than the noise, and never when an event gets worse.</p>
+<table class="sortable"><thead><tr><th>unit</th><th>outcome</th><th>Q RMS error before [% MBASE, median over events]</th>
+<th>after</th><th>changed</th><th>parameters not identifiable</th></tr></thead><tbody>{''.join(rows)}</tbody></table>
 """
+    return _page("jaxdse validate", body, script=True)
 
 
 def validate(path, out_dir, stream=None) -> dict:

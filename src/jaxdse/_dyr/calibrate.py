@@ -321,6 +321,8 @@ class Calibration(NamedTuple):
     """(sd of ln|V|, sd of the angle [rad]) drawn for the input part of the intervals."""
     converged: bool
     unit: DyrUnit
+    specs: tuple
+    """The :class:`ParameterSpec` of each fitted parameter (``labels`` order)."""
 
 
 @eqx.filter_jit
@@ -395,12 +397,110 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     half = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
     positive = np.array([s.positive for s in specs])
     half = np.where(positive, np.hypot(half, cal.model_error * np.abs(x)), half)
-    ci = np.stack([x - half, x + half], axis=1)
+    lower, upper = (np.array([getattr(s, k) for s in specs]) for k in ("lower", "upper"))
+    ci = np.stack([np.maximum(x - half, lower), np.minimum(x + half, upper)], axis=1)  # within the bounds
     return Calibration([s.label for s in specs], x0, x, ci, np.asarray(_rms_pq(unit, events, settings)),
                        np.asarray(_rms_pq(fitted, events, settings)), rho, bandwidth, v_noise,
-                       bool(sol.result == optx.RESULTS.successful), fitted)
+                       bool(sol.result == optx.RESULTS.successful), fitted, specs)
 
 
-__all__ = ["Calibration", "CalibrationSettings", "Events", "ParameterSpec", "Ranking", "calibrate",
+# --- the decision: change only what the events reject ------------------------------------------
+
+@eqx.filter_jit
+def _event_costs(unit, events: Events, sigma, settings):
+    """Per event, the sum of squared noise-normalised residuals of P and Q [-], [E]."""
+    def one(series, p, q, w):
+        r = play_back(unit, series, settings)
+        c = w * (((r.p_pu - p) / sigma[0]) ** 2 + ((r.q_pu - q) / sigma[1]) ** 2)
+        return jnp.sum(jnp.where(jnp.isfinite(c), c, 1e6))
+    return jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight)
+
+
+def noise_threshold(k: int, lag1: float, level: float = 0.95) -> float:
+    """The change of the normalised cost that noise alone gives, freeing ``k`` parameters: the
+    ``level`` quantile of chi-square with k degrees of freedom (a likelihood-ratio test), times
+    the long-run variance factor (1 + rho)/(1 - rho) of residuals with lag-1 autocorrelation
+    ``lag1`` (white: 1)."""
+    from scipy.stats import chi2
+
+    rho = float(np.clip(lag1, 0.0, 0.99))
+    return float(chi2.ppf(level, max(k, 1))) * (1.0 + rho) / (1.0 - rho)
+
+
+class Decision(NamedTuple):
+    """What a calibration may change in the .dyr, and why (host values)."""
+
+    unit: DyrUnit
+    """The unit to file: the .dyr one with only the changed parameters replaced."""
+    changed: list
+    """Labels of the parameters changed."""
+    status: dict
+    """Label -> "changed" or "consistent with the .dyr" (its value inside the 95 % interval of
+    the fit, or the fit's gain within the noise) or "kept: ..." (refused, see ``refused``)."""
+    fit: Calibration | None
+    """The fit of the changed parameters (or the last fit tried)."""
+    first_fit: Calibration | None
+    """The fit of every identifiable parameter (whose intervals say which are rejected)."""
+    cost_before: np.ndarray
+    """Per event, the noise-normalised squared error at the .dyr values [-]."""
+    cost_after: np.ndarray
+    """The same for ``unit`` [-]."""
+    threshold: float
+    """The cost change that noise alone gives for the parameters changed [-]."""
+    refused: str | None
+    """Why a calibration that the events ask for was not written (an event gets worse)."""
+
+
+def calibrate_where_rejected(unit: DyrUnit, specs, events: Events,
+                             settings: PlaybackSettings = PlaybackSettings(),
+                             cal: CalibrationSettings = CalibrationSettings()) -> Decision:
+    """Calibrate, then change only what the events reject, never making an event worse.
+
+    1. fit ``specs`` (the identifiable parameters); a parameter whose .dyr value lies inside
+       its 95 % interval is consistent with the .dyr and is put back; the others are fitted
+       again alone, until every one left is rejected;
+    2. the change is kept only if the joint cost (squared residuals over the noise level, all
+       events) falls by more than noise alone would give (:func:`noise_threshold`);
+    3. it is refused if any event's cost rises by more than that: a fit that trades one event
+       against another is a model error, not a better value.
+    """
+    specs = tuple(specs)
+    sigma = jnp.asarray(noise_level(events, cal.noise_floor_pu))
+    before = np.asarray(_event_costs(unit, events, sigma, settings))
+    status = {s.label: "consistent with the .dyr" for s in specs}
+    free, first, fit = list(specs), None, None
+    while free:
+        fit = calibrate(unit, free, events, settings, cal)
+        first = first or fit
+        rejected = [s for s, x0, ci in zip(free, fit.dyr_values, fit.ci95) if not ci[0] <= x0 <= ci[1]]
+        if len(rejected) == len(free):
+            break
+        free = rejected
+    if not free:
+        return Decision(unit, [], status, fit, first, before, before, noise_threshold(0, 0.0), None)
+    after = np.asarray(_event_costs(fit.unit, events, sigma, settings))
+    threshold = noise_threshold(len(free), fit.autocorrelation)
+    gain = float(before.sum() - after.sum())
+    if gain <= threshold:
+        for s in free:
+            status[s.label] = ("consistent with the .dyr: the fit improves the joint error by "
+                               f"{gain:.3g}, within the noise ({threshold:.3g})")
+        return Decision(unit, [], status, fit, first, before, before, threshold, None)
+    worse = [e for e in range(len(before)) if after[e] - before[e] > threshold]
+    if worse:
+        why = (f"the fit of {', '.join(s.label for s in free)} makes event(s) "
+               f"{', '.join(str(e + 1) for e in worse)} worse beyond the noise (normalised cost "
+               + "; ".join(f"{before[e]:.3g} -> {after[e]:.3g}" for e in worse)
+               + f", noise {threshold:.3g}): a model error, not a better value; .dyr kept")
+        for s in free:
+            status[s.label] = "kept: calibration refused"
+        return Decision(unit, [], status, fit, first, before, before, threshold, why)
+    for s in free:
+        status[s.label] = "changed"
+    return Decision(fit.unit, [s.label for s in free], status, fit, first, before, after, threshold, None)
+
+
+__all__ = ["Calibration", "CalibrationSettings", "Decision", "Events", "ParameterSpec", "Ranking",
+           "calibrate", "calibrate_where_rejected", "noise_threshold",
            "jacobian", "long_run_covariance", "measured_pq", "noise_level", "rank", "residuals",
            "stack_events", "voltage_noise", "with_values"]
