@@ -445,7 +445,7 @@ def test_every_record_of_the_data_files(path):
 
 
 BAD = [
-    ("PSS2A", IEEEST_WECC, "not a supported stabiliser"),
+    ("PSS3B", IEEEST_WECC, "not a supported stabiliser"),
     ("IEEEST", IEEEST_WECC[:-1], "expected 19 constants"),
     ("IEEEST", IEEEST_WECC + (0,), "expected 19 constants"),
     ("ST2CUT", ST2CUT_WECC_5[:-2], "expected 20 constants"),

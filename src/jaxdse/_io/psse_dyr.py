@@ -36,6 +36,10 @@ MACHINE_FIELDS = {
                "Xl", "S(1.0)", "S(1.2)"),
     "GENTPJ": ("T'do", "T''do", "T'qo", "T''qo", "H", "D", "Xd", "Xq", "X'd", "X'q", "X''d",
                "Xl", "S(1.0)", "S(1.2)", "Kis"),
+    "GENROE": ("T'do", "T''do", "T'qo", "T''qo", "H", "D", "Xd", "Xq", "X'd", "X'q", "X''d",
+               "Xl", "S(1.0)", "S(1.2)"),
+    "GENSAE": ("T'do", "T''do", "T''qo", "H", "D", "Xd", "Xq", "X'd", "X''d", "Xl",
+               "S(1.0)", "S(1.2)"),
 }
 GOVERNOR_FIELDS = {
     "TGOV1": ("R", "T1", "VMAX", "VMIN", "T2", "T3", "Dt"),
@@ -47,6 +51,10 @@ GOVERNOR_FIELDS = {
               "Tdgov", "Vmax", "Vmin", "Tact", "Kturb", "Wfnl", "Tb", "Tc", "Teng", "Tfload",
               "Kpload", "Kiload", "Ldref", "Dm", "Ropen", "Rclose", "Kimw", "Aset", "Ka", "Ta",
               "Trate", "db", "Tsa", "Tsb", "Rup", "Rdown"),
+    "IEESGO": ("T1", "T2", "T3", "T4", "T5", "T6", "K1", "K2", "K3", "PMAX", "PMIN"),
+    "WSIEG1": ("JBUS", "M", "K", "T1", "T2", "T3", "Uo", "Uc", "PMAX", "PMIN", "T4", "K1", "K2",
+               "T5", "K3", "K4", "T6", "K5", "K6", "T7", "K7", "K8", "DB1", "ERR", "DB2", "GV1",
+               "PGV1", "GV2", "PGV2", "GV3", "PGV3", "GV4", "PGV4", "GV5", "PGV5", "IBLOCK"),
 }
 OPTIONAL_TRAILING = {"GENTPJ": 1}
 """Models whose last constants may be omitted (GENTPJ's Kis; default 0)."""
@@ -70,6 +78,15 @@ GOVERNOR_PARAMETERS = {
         "dm_pu": "Dm", "r_open_pu_s": "Ropen", "r_close_pu_s": "Rclose", "kimw": "Kimw",
         "aset_pu_s": "Aset", "ka": "Ka", "t_a_s": "Ta", "trate_mw": "Trate", "db_pu": "db",
         "t_sa_s": "Tsa", "t_sb_s": "Tsb", "rup_pu_s": "Rup", "rdown_pu_s": "Rdown"},
+    "IEESGO": {"t1_s": "T1", "t2_s": "T2", "t3_s": "T3", "t4_s": "T4", "t5_s": "T5", "t6_s": "T6",
+        "k1": "K1", "k2": "K2", "k3": "K3", "p_max_pu": "PMAX", "p_min_pu": "PMIN"},
+    "WSIEG1": {"k": "K", "t1_s": "T1", "t2_s": "T2", "t3_s": "T3", "uo_pu_s": "Uo",
+        "uc_pu_s": "Uc", "p_max_pu": "PMAX", "p_min_pu": "PMIN", "t4_s": "T4", "k1": "K1",
+        "k2": "K2", "t5_s": "T5", "k3": "K3", "k4": "K4", "t6_s": "T6", "k5": "K5", "k6": "K6",
+        "t7_s": "T7", "k7": "K7", "k8": "K8", "db1_pu": "DB1", "err_pu": "ERR", "db2_pu": "DB2",
+        "gv1_pu": "GV1", "pgv1_pu": "PGV1", "gv2_pu": "GV2", "pgv2_pu": "PGV2", "gv3_pu": "GV3",
+        "pgv3_pu": "PGV3", "gv4_pu": "GV4", "pgv4_pu": "PGV4", "gv5_pu": "GV5",
+        "pgv5_pu": "PGV5", "iblock": "IBLOCK"},
 }
 """Field of the governor module (``GOVERNORS[model]``) -> the PSS/E constant it takes; GGOV1's
 Rselect and Flag (integers) and its base ratio are set apart."""
@@ -91,7 +108,8 @@ class DyrRecord:
 
     ``constants`` holds floats, or strings for non-numeric tokens of models read raw (e.g.
     REPCA1's quoted ICON). ``params`` names the constants in PSS/E order for typed models
-    (machines GENCLS, GENSAL, GENROU, GENTPJ and governors TGOV1, IEEEG1, GAST, HYGOV, GGOV1)
+    (machines GENCLS, GENSAL, GENROU, GENTPJ, GENROE, GENSAE and governors TGOV1, IEEEG1, GAST,
+    HYGOV, GGOV1, IEESGO, WSIEG1)
     and is empty for the others.
     """
 

@@ -2,8 +2,9 @@
 
 The paper uses 50Hertz's in-house power-control governor (its Fig. 2), which is not
 published; jaxdse ships the standard PSS/E models TGOV1 (steam), IEEEG1 (IEEE type 1
-steam), GAST (gas turbine), HYGOV (hydro) and GGOV1 (general purpose) (Siemens PTI, *PSS/E
-Model Library*; IEEE PES-TR1, 2013). New models subclass :class:`AbstractGovernor`.
+steam), GAST (gas turbine), HYGOV (hydro), GGOV1 (general purpose), IEESGO (IEEE standard
+steam) and WSIEG1 (WECC's IEEEG1 with deadbands and valve characteristic) (Siemens PTI,
+*PSS/E Model Library*; IEEE PES-TR1, 2013). New models subclass :class:`AbstractGovernor`.
 
 Conventions of every model but TGOV1 (PSS/E behaviour):
 
@@ -620,8 +621,324 @@ class GGOV1(AbstractGovernor):
         return self.r_pu * fsr + dw
 
 
+# --- IEESGO -----------------------------------------------------------------------------------
+
+class IEESGO(AbstractGovernor):
+    """PSS/E IEESGO, the IEEE standard steam turbine-governor (IEEE Committee Report, 1973).
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "IEESGO"; IEEE Committee Report,
+    "Dynamic models for steam and hydro turbines in power system studies", IEEE Trans.
+    PAS-92 (1973); the same structure in the BSD-licensed STEPS ``IEESGO``)::
+
+        g    = K1 (1 + s T2)/(1 + s T1) . 1/(1 + s T3) dw             (governor)
+        p    = clip(P0 - g, PMIN, PMAX)                               (static limit)
+        x4   = p/(1 + s T4)                                           (HP section)
+        x5   = K2 x4/(1 + s T5)                                       (reheater / IP section)
+        x6   = K3 x5/(1 + s T6)                                       (LP section)
+        Tm   = PMECH = (1 - K2) x4 + (1 - K3) x5 + x6
+
+    so that the steady state is Tm = clip(P0 - K1 dw, PMIN, PMAX) (the fractions sum to 1).
+    States: [lead-lag (T1), lag (T3), x4, x5/K2, x6/K3] (the last two hold their lag's
+    state before the gain). ``t_ref`` is P0 [pu, machine base].
+
+    K1 is the governor gain (1/droop) on the machine base, as PSS/E applies it (ANDES 2.0
+    applies it on the system base). Zero time constants, as PSS/E: T1 = 0 makes the lead-lag
+    a gain K1 (T2 ignored); T3, T5, T6 = 0 make their lags pass-throughs. T4 must be > 0:
+    with T4 = 0 Tm would follow P0 algebraically, and jaxdse's governor interface computes
+    Tm from the state and the speed alone (``torque(state, dw)``); ValueError. The limit
+    acts on the algebraic signal after the summing junction, so no state winds up.
+    """
+
+    t1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T1: controller lag [s] (0: lead-lag bypassed)."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T2: controller lead compensation [s]."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """T3: governor lag [s] (0: pass-through)."""
+    t4_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """T4: steam inlet delay [s] (0: pass-through)."""
+    t5_s: Float[Array, ""] = eqx.field(converter=as_float, default=7.0)
+    """T5: reheater delay [s] (0: pass-through)."""
+    t6_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.6)
+    """T6: IP-LP turbine and crossover delay [s] (0: pass-through)."""
+    k1: Float[Array, ""] = eqx.field(converter=as_float, default=20.0)
+    """K1: 1/(pu regulation) [pu power / pu speed], machine base."""
+    k2: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
+    """K2: fraction [-] (the power after T4 is 1 - K2)."""
+    k3: Float[Array, ""] = eqx.field(converter=as_float, default=0.43)
+    """K3: fraction [-]."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """PMAX: upper power limit [pu, machine base]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PMIN: lower power limit [pu, machine base]."""
+
+    def __check_init__(self):
+        check_positive(self, "t4_s")
+        check_nonnegative(self, "t1_s", "t2_s", "t3_s", "t5_s", "t6_s", "k1")
+        if all_concrete(self.p_max_pu, self.p_min_pu):
+            check_that(self, self.p_max_pu >= self.p_min_pu,
+                       f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
+
+    def _turbine(self, state):
+        """((1 - K2) x4, (1 - K3) x5, x6) and the derivatives of the T5 and T6 lags."""
+        x4 = state[2]
+        y5, d5 = _lag(x4, state[3], self.t5_s)
+        x5 = self.k2 * y5
+        y6, d6 = _lag(x5, state[4], self.t6_s)
+        return x4, x5, self.k3 * y6, d5, d6
+
+    def steady_state(self, t_ref, dw):
+        dw = jnp.asarray(dw, float)
+        p = jnp.clip(t_ref - self.k1 * dw, self.p_min_pu, self.p_max_pu)
+        return jnp.stack([dw + 0.0 * p, self.k1 * dw + 0.0 * p, p, p, self.k2 * p])
+
+    def vector_field(self, state, dw, t_ref):
+        g, d1 = _lead_lag(dw, state[0], self.t2_s, self.t1_s)
+        g, d2 = _lag(self.k1 * g, state[1], self.t3_s)
+        p = jnp.clip(t_ref - g, self.p_min_pu, self.p_max_pu)
+        d4 = (p - state[2]) / self.t4_s
+        _, _, _, d5, d6 = self._turbine(state)
+        return jnp.stack([d1, d2, d4, d5, d6])
+
+    def torque(self, state, dw):
+        x4, x5, x6, _, _ = self._turbine(state)
+        return (1.0 - self.k2) * x4 + (1.0 - self.k3) * x5 + x6
+
+    def reference_from_steady(self, t_m, dw):
+        return t_m + self.k1 * dw
+
+
+# --- WSIEG1 -----------------------------------------------------------------------------------
+
+def _piecewise_linear(x, xs, ys):
+    """The polyline through (xs[k], ys[k]) (xs non-decreasing), extended linearly beyond its end
+    segments; a segment of zero width has slope 0."""
+    k = jnp.clip(jnp.searchsorted(xs, x, side="right") - 1, 0, xs.shape[-1] - 2)
+    x0, x1, y0, y1 = xs[k], xs[k + 1], ys[k], ys[k + 1]
+    dx = x1 - x0
+    slope = jnp.where(dx != 0, (y1 - y0) / jnp.where(dx != 0, dx, 1.0), 0.0)
+    return y0 + slope * (x - x0)
+
+
+def _deadband(u, db):
+    """Intentional deadband without memory: 0 within +-db, u -+ db outside (db = 0: u)."""
+    return jnp.where(u > db, u - db, jnp.where(u < -db, u + db, 0.0))
+
+
+class WSIEG1(AbstractGovernor):
+    """PSS/E WSIEG1, WECC's modified IEEE type 1 steam turbine-governor (IEEEG1 with deadbands,
+    a nonlinear gate-valve characteristic and governor blocking), single-shaft use.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "WSIEG1"; IEEEG1 as in :class:`IEEEG1`;
+    the block order and the CON list cross-read in OpenIPSL ``WSIEG1`` and GridPACK
+    ``wsieg1``, BSD-3)::
+
+        e    = deadband(dw, DB1)                                      (intentional deadband)
+        LL   = K (1 + s T2)/(1 + s T1) e                              (speed relay)
+        dGV  = clip((Po - LL - GVb)/T3, Uc, Uo),  GV = 1/s dGV in [PMIN', PMAX'] (non-windup)
+        GVb  = backlash(GV, DB2)                                      (unintentional deadband)
+        PGV  = the polyline through (GV1, PGV1) ... (GV5, PGV5) at GVb (nonlinear valve gain)
+        x4 = PGV/(1 + sT4), x5 = x4/(1 + sT5), x6 = x5/(1 + sT6), x7 = x6/(1 + sT7)
+        Tm   = PMECH_HP = K1 x4 + K3 x5 + K5 x6 + K7 x7
+
+    States (7): [LL lead-lag, GV, GVb, x4, x5, x6, x7]. ``t_ref`` is Po, the load reference
+    in valve position units (at nominal speed the steady valve position is Po).
+
+    Conventions and simplifications (explicit):
+
+    * DB1 is a memoryless deadband on the speed deviation [pu]; ERR, PSS/E's intentional
+      deadband hysteresis, is kept as a field but not represented (no memory state).
+    * DB2 is a backlash of half-width DB2 on the valve position (as OpenIPSL's WSIEG1):
+      GVb follows GV only while GV pushes against an edge of the band |GV - GVb| <= DB2,
+      realised as dGVb/dt = dGV/dt there and 0 elsewhere, plus (distance outside the
+      band)/T3, which is 0 on the exact solution and returns GVb to the band edge where a
+      discrete integration step overshot it; DB2 = 0: GVb = GV. The valve position feeds
+      back after the backlash (as in OpenIPSL), so GV settles DB2 beyond GVb.
+    * The valve characteristic is used when any of GV1..GV5, PGV1..PGV5 is nonzero (GV1 <
+      GV2 < ... < GV5 and PGV non-decreasing required), extended linearly beyond its end
+      points; all zero: PGV = GV.
+    * IBLOCK: 0 no blocking; 1: PMIN = 0 is replaced by Po (the initial valve position,
+      governor cannot lower the valve); 2: PMAX = 0 is replaced by Po (cannot raise it);
+      3: both, each where it is 0. OpenIPSL uses the initial power PMECH0/(K1+K3+K5+K7)
+      instead, which equals Po when the valve characteristic is the identity.
+    * Single shaft, as :class:`IEEEG1`: the LP output (K2, K4, K6, K8) is kept for the record.
+      T1 = 0 makes the speed relay the gain K; T4..T7 = 0 are pass-throughs; T3 must be > 0.
+    """
+
+    k: Float[Array, ""] = eqx.field(converter=as_float, default=20.0)
+    """K: governor gain, 1/droop [pu valve / pu speed]."""
+    t1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T1: speed relay lag [s] (0: gain K only)."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T2: speed relay lead [s]."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """T3: valve positioner time constant [s] (> 0)."""
+    uo_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Uo: maximum valve opening rate [pu/s] (> 0)."""
+    uc_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-0.1)
+    """Uc: maximum valve closing rate [pu/s] (< 0)."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """PMAX: maximum valve position [pu] (0 with IBLOCK 2 or 3: the initial position)."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PMIN: minimum valve position [pu] (0 with IBLOCK 1 or 3: the initial position)."""
+    t4_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """T4: steam bowl time constant [s]."""
+    k1: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """K1: HP fraction after T4 [-]."""
+    k2: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K2: LP fraction after T4 [-] (ignored: single shaft)."""
+    t5_s: Float[Array, ""] = eqx.field(converter=as_float, default=7.0)
+    """T5: reheater time constant [s]."""
+    k3: Float[Array, ""] = eqx.field(converter=as_float, default=0.4)
+    """K3: HP fraction after T5 [-]."""
+    k4: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K4: LP fraction after T5 [-] (ignored)."""
+    t6_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.6)
+    """T6: crossover time constant [s]."""
+    k5: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """K5: HP fraction after T6 [-]."""
+    k6: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K6: LP fraction after T6 [-] (ignored)."""
+    t7_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T7: double reheat time constant [s]."""
+    k7: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K7: HP fraction after T7 [-]."""
+    k8: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """K8: LP fraction after T7 [-] (ignored)."""
+    db1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """DB1: intentional deadband on the speed deviation [pu] (>= 0)."""
+    err_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """ERR: intentional deadband hysteresis [pu] (kept; not represented)."""
+    db2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """DB2: unintentional deadband (backlash half-width) on the valve position [pu] (>= 0)."""
+    gv1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GV1: valve position of point 1 [pu]."""
+    pgv1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PGV1: flow (power) at GV1 [pu]."""
+    gv2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GV2 [pu]."""
+    pgv2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PGV2 [pu]."""
+    gv3_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GV3 [pu]."""
+    pgv3_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PGV3 [pu]."""
+    gv4_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GV4 [pu]."""
+    pgv4_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PGV4 [pu]."""
+    gv5_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """GV5 [pu]."""
+    pgv5_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PGV5 [pu]."""
+    iblock: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """IBLOCK: governor blocking 0..3 (an integer kept as an array leaf, see above)."""
+
+    def __check_init__(self):
+        check_positive(self, "t3_s", "uo_pu_s")
+        check_nonnegative(self, "k", "t1_s", "t2_s", "t4_s", "t5_s", "t6_s", "t7_s", "k1", "k3",
+                          "k5", "k7", "db1_pu", "err_pu", "db2_pu")
+        if all_concrete(self.uc_pu_s, self.p_max_pu, self.p_min_pu, self.k1, self.k3, self.k5,
+                        self.k7, self.iblock):
+            check_that(self, self.uc_pu_s < 0, f"Uc must be < 0, got {self.uc_pu_s}")
+            check_that(self, self.p_max_pu >= self.p_min_pu,
+                       f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
+            check_that(self, self.k1 + self.k3 + self.k5 + self.k7 > 0,
+                       "K1 + K3 + K5 + K7 must be > 0 (single-shaft output)")
+            ib = np.asarray(self.iblock)
+            check_that(self, np.isin(ib, (0.0, 1.0, 2.0, 3.0)),
+                       f"IBLOCK must be 0, 1, 2 or 3, got {ib}")
+        gv, pgv = self._table()
+        if all_concrete(gv, pgv):
+            gv, pgv = np.asarray(gv), np.asarray(pgv)
+            used = np.any(gv != 0, axis=-1) | np.any(pgv != 0, axis=-1)
+            check_that(self, ~used | np.all(np.diff(gv, axis=-1) > 0, axis=-1),
+                       f"GV1 < GV2 < ... < GV5 required for the valve characteristic, got {gv}")
+            check_that(self, ~used | np.all(np.diff(pgv, axis=-1) >= 0, axis=-1),
+                       f"PGV1 <= PGV2 <= ... <= PGV5 required, got {pgv}")
+
+    @property
+    def k_hp(self):
+        """K1 + K3 + K5 + K7: the steady-state gain from PGV to Tm."""
+        return self.k1 + self.k3 + self.k5 + self.k7
+
+    def _table(self):
+        gv = jnp.stack([self.gv1_pu, self.gv2_pu, self.gv3_pu, self.gv4_pu, self.gv5_pu], axis=-1)
+        pgv = jnp.stack([self.pgv1_pu, self.pgv2_pu, self.pgv3_pu, self.pgv4_pu, self.pgv5_pu],
+                        axis=-1)
+        return gv, pgv
+
+    def _table_used(self):
+        gv, pgv = self._table()
+        return jnp.any(gv != 0) | jnp.any(pgv != 0)
+
+    def flow(self, gv):
+        """The nonlinear valve characteristic PGV(GV) [pu] (identity when not given)."""
+        xs, ys = self._table()
+        return jnp.where(self._table_used(), _piecewise_linear(gv, xs, ys), gv)
+
+    def valve_for_flow(self, pgv):
+        """GV that gives the flow ``pgv`` (the inverse of :meth:`flow`)."""
+        xs, ys = self._table()
+        return jnp.where(self._table_used(), _piecewise_linear(pgv, ys, xs), pgv)
+
+    def _limits(self, t_ref):
+        """(PMIN', PMAX') after IBLOCK: a zero limit blocked at Po."""
+        lo_blk = ((self.iblock == 1) | (self.iblock == 3)) & (self.p_min_pu == 0)
+        hi_blk = ((self.iblock == 2) | (self.iblock == 3)) & (self.p_max_pu == 0)
+        return jnp.where(lo_blk, t_ref, self.p_min_pu), jnp.where(hi_blk, t_ref, self.p_max_pu)
+
+    def _valve_out(self, state):
+        """GVb: the valve position after the backlash, GV seen clipped to PMIN/PMAX (a limit
+        blocked at Po by IBLOCK is held by the non-windup rule alone: ``torque`` has no Po)."""
+        lo = jnp.where(((self.iblock == 1) | (self.iblock == 3)) & (self.p_min_pu == 0),
+                       -jnp.inf, self.p_min_pu)
+        hi = jnp.where(((self.iblock == 2) | (self.iblock == 3)) & (self.p_max_pu == 0),
+                       jnp.inf, self.p_max_pu)
+        return jnp.where(self.db2_pu > 0, state[2], jnp.clip(state[1], lo, hi))
+
+    def _turbine(self, state):
+        y4, d4 = _lag(self.flow(self._valve_out(state)), state[3], self.t4_s)
+        y5, d5 = _lag(y4, state[4], self.t5_s)
+        y6, d6 = _lag(y5, state[5], self.t6_s)
+        y7, d7 = _lag(y6, state[6], self.t7_s)
+        return (y4, y5, y6, y7), (d4, d5, d6, d7)
+
+    def steady_state(self, t_ref, dw):
+        e = _deadband(jnp.asarray(dw, float), self.db1_pu)
+        lo, hi = self._limits(t_ref)
+        gv = jnp.clip(t_ref - self.k * e, lo, hi)
+        p = self.flow(gv)
+        return jnp.stack([e + 0.0 * gv, gv, gv, p, p, p, p])
+
+    def vector_field(self, state, dw, t_ref):
+        e = _deadband(dw, self.db1_pu)
+        y, d_ll = _lead_lag(e, state[0], self.t2_s, self.t1_s)
+        gv, gvb = state[1], self._valve_out(state)
+        lo, hi = self._limits(t_ref)
+        d_gv = jnp.clip((t_ref - self.k * y - gvb) / self.t3_s, self.uc_pu_s, self.uo_pu_s)
+        d_gv = _blocked(gv, d_gv, lo, hi)
+        gap = gv - state[2]
+        engaged = ((gap >= self.db2_pu) & (d_gv > 0)) | ((gap <= -self.db2_pu) & (d_gv < 0))
+        # exact backlash: GVb moves with GV at an edge of the band; the second term (0 on the
+        # exact solution) returns GVb to the band edge where a discrete step overshot it
+        excess = gap - jnp.clip(gap, -self.db2_pu, self.db2_pu)
+        d_gvb = jnp.where(engaged | (self.db2_pu <= 0), d_gv, 0.0) + excess / self.t3_s
+        _, (d4, d5, d6, d7) = self._turbine(state)
+        return jnp.stack([d_ll, d_gv, d_gvb, d4, d5, d6, d7])
+
+    def torque(self, state, dw):
+        (y4, y5, y6, y7), _ = self._turbine(state)
+        return self.k1 * y4 + self.k3 * y5 + self.k5 * y6 + self.k7 * y7
+
+    def reference_from_steady(self, t_m, dw):
+        gv = self.valve_for_flow(t_m / self.k_hp)
+        return gv + self.k * _deadband(jnp.asarray(dw, float), self.db1_pu)
+
+
 GOVERNORS: dict[str, type[AbstractGovernor]] = {
-    "TGOV1": TGOV1, "IEEEG1": IEEEG1, "GAST": GAST, "HYGOV": HYGOV, "GGOV1": GGOV1}
+    "TGOV1": TGOV1, "IEEEG1": IEEEG1, "GAST": GAST, "HYGOV": HYGOV, "GGOV1": GGOV1,
+    "IEESGO": IEESGO, "WSIEG1": WSIEG1}
 """The governor models by their PSS/E name: TOML ``[governor] model``, .dyr records and the
 fleet's governor slots (in this order)."""
 

@@ -1,8 +1,9 @@
-"""PSS/E synchronous machine models GENROU, GENSAL and GENCLS driven by an imposed terminal voltage.
+"""PSS/E synchronous machine models GENROU, GENSAL, GENCLS, GENROE, GENSAE and GENTPJ driven by
+an imposed terminal voltage.
 
-Sources: Siemens PTI, *PSS(R)E Model Library*, "GENROU", "GENSAL", "GENCLS" block diagrams;
-the equations as written out in the BSD-licensed OpenIPSL library
-(``OpenIPSL.Electrical.Machines.PSSE``), which is validated against PSS/E.
+Sources: Siemens PTI, *PSS(R)E Model Library*, "GENROU", "GENSAL", "GENCLS", "GENROE",
+"GENSAE", "GENTPJ" block diagrams; the equations as written out in the BSD-licensed OpenIPSL
+library (``OpenIPSL.Electrical.Machines.PSSE``), which is validated against PSS/E.
 
 Conventions (machine base, network frame rotating at nominal speed):
 
@@ -14,7 +15,9 @@ Conventions (machine base, network frame rotating at nominal speed):
 * swing: ``2H d(omega)/dt = Tm - Te - D (omega - 1)``, ``d(delta)/dt = omega_s (omega - 1)``; Tm is the
   mechanical torque [pu] (the governors' output), Te = psi_d i_q - psi_q i_d.
 * saturation: PSS/E's quadratic ``S(x) = B (x - A)^2 / x`` (x > A) through S(1.0) and S(1.2), on
-  |psi''| for GENROU (both axes, the q axis scaled by (Xq - Xl)/(Xd - Xl)) and on E'q for GENSAL.
+  |psi''| for GENROU (both axes, the q axis scaled by (Xq - Xl)/(Xd - Xl)) and on E'q for GENSAL;
+  the exponential ``S(x) = B x^A`` through the same points for GENROE (as GENROU) and GENSAE
+  (on |psi''|, both axes); GENTPJ's on the air-gap flux plus Kis |I| (see :class:`GENTPJ`).
 """
 
 from __future__ import annotations
@@ -23,6 +26,7 @@ import abc
 from typing import NamedTuple
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -139,6 +143,11 @@ class GENROU(AbstractMachine):
     """PSS/E GENROU: round rotor, two d-axis and two q-axis rotor circuits, quadratic saturation
     on the subtransient flux on both axes (PSS/E Model Library, GENROU).
 
+    Records are used as given wherever the equations can be evaluated: X'd, X'q and Xd other
+    than Xl (the denominators), time constants and X''d > 0. The usual order Xl < X''d < X'd
+    <= Xd, X''d < X'q <= Xq is not required: PSS/E warns about records outside it (shipped
+    cases have X''d below Xl) and simulates them, and so does this model.
+
     States: E'q, psi_kd, E'd, psi_kq, delta, omega.
     """
 
@@ -180,9 +189,9 @@ class GENROU(AbstractMachine):
                        "xd1_pu", "xq1_pu", "x2_pu", "omega_s_rad_s")
         check_nonnegative(self, "xl_pu", "s10", "s12", "ra_pu")
         if concrete(self.xd_pu) and concrete(self.xl_pu):
-            ok = ((self.xl_pu < self.x2_pu) & (self.x2_pu < self.xd1_pu) & (self.xd1_pu <= self.xd_pu)
-                  & (self.x2_pu < self.xq1_pu) & (self.xq1_pu <= self.xq_pu))
-            _check_order(self, ok, "needs Xl < X''d < X'd <= Xd and X''d < X'q <= Xq")
+            ok = ((self.xd1_pu != self.xl_pu) & (self.xq1_pu != self.xl_pu) & (self.xd_pu != self.xl_pu))
+            _check_order(self, ok, "needs X'd, X'q and Xd other than Xl (the equations divide by "
+                         "X'd - Xl, X'q - Xl and Xd - Xl)")
 
     @property
     def n_states(self) -> int:
@@ -197,16 +206,19 @@ class GENROU(AbstractMachine):
         kq = (self.xq_pu - xl) / (self.xd_pu - xl)
         return k1d, k3d, k1q, k3q, kq
 
-    def _sat(self, psi2d, psi2q):
+    def _saturation(self, x):
+        """S(x): PSS/E's quadratic saturation through S(1.0) and S(1.2)."""
         a, b = saturation_coefficients(self.s10, self.s12)
-        return saturation(jnp.sqrt(psi2d ** 2 + psi2q ** 2), a, b)
+        return saturation(x, a, b)
+
+    def _sat(self, psi2d, psi2q):
+        return self._saturation(jnp.sqrt(psi2d ** 2 + psi2q ** 2))
 
     def steady_state(self, v_re, v_im, i_re, i_im) -> MachineSteady:
         ra, x2, xl = self.ra_pu, self.x2_pu, self.xl_pu
         _, _, _, _, kq = self._k()
         # |psi''| is frame-free: V + (Ra + jX'') I; the q axis in steady state is then linear.
-        a, b = saturation_coefficients(self.s10, self.s12)
-        sat = saturation(jnp.hypot(v_re + ra * i_re - x2 * i_im, v_im + ra * i_im + x2 * i_re), a, b)
+        sat = self._saturation(jnp.hypot(v_re + ra * i_re - x2 * i_im, v_im + ra * i_im + x2 * i_re))
         xq_sat = x2 + (self.xq_pu - x2) / (1.0 + sat * kq)
         delta = jnp.arctan2(v_im + ra * i_im + xq_sat * i_re, v_re + ra * i_re - xq_sat * i_im)
         vd, vq = to_dq(v_re, v_im, delta)
@@ -262,7 +274,8 @@ class GENROU(AbstractMachine):
 
 class GENSAL(AbstractMachine):
     """PSS/E GENSAL: salient pole, two d-axis and one q-axis rotor circuit, quadratic saturation
-    of E'q on the d axis only (PSS/E Model Library, GENSAL).
+    of E'q on the d axis only (PSS/E Model Library, GENSAL). As :class:`GENROU`, records are used
+    as given where the equations can be evaluated (X'd other than Xl).
 
     States: E'q, psi_kd, psi''q, delta, omega.
     """
@@ -301,9 +314,8 @@ class GENSAL(AbstractMachine):
                        "x2_pu", "omega_s_rad_s")
         check_nonnegative(self, "xl_pu", "s10", "s12", "ra_pu")
         if concrete(self.xd_pu) and concrete(self.xl_pu):
-            ok = ((self.xl_pu < self.x2_pu) & (self.x2_pu < self.xd1_pu) & (self.xd1_pu <= self.xd_pu)
-                  & (self.x2_pu < self.xq_pu))
-            _check_order(self, ok, "needs Xl < X''d < X'd <= Xd and X''d < Xq")
+            _check_order(self, self.xd1_pu != self.xl_pu,
+                         "needs X'd other than Xl (the equations divide by X'd - Xl)")
 
     @property
     def n_states(self) -> int:
@@ -401,13 +413,330 @@ class GENCLS(AbstractMachine):
         return jnp.zeros((1,), dtype=state.dtype)
 
 
-MACHINES = {"GENROU": GENROU, "GENSAL": GENSAL, "GENCLS": GENCLS}
+def exponential_saturation(x, s10, s12):
+    """PSS/E's exponential saturation S(x) = B x^A through S(1.0) = s10 and S(1.2) = s12:
+    B = s10, A = ln(s12/s10)/ln(1.2). 0 where s10 <= 0 or s12 <= 0 (no saturation data).
+
+    ``x`` is floored at 1e-6 inside the power so that value and gradient stay finite at 0."""
+    on = (s10 > 0) & (s12 > 0)
+    a = jnp.log(jnp.where(on, s12, 1.0) / jnp.where(on, s10, 1.0)) / jnp.log(1.2)
+    xs = jnp.maximum(x, 1e-6)
+    return jnp.where(on, s10 * jnp.exp(a * jnp.log(xs)), 0.0)
+
+
+class GENROE(GENROU):
+    """PSS/E GENROE: GENROU with exponential saturation (PSS/E Model Library, GENROE).
+
+    The same round-rotor equations, states and saturation input as :class:`GENROU` (|psi''| on
+    both axes, the q axis scaled by (Xq - Xl)/(Xd - Xl)); the saturation function is
+    S(psi'') = B psi''^A through S(1.0) and S(1.2) (:func:`exponential_saturation`) instead
+    of the quadratic one. With S(1.0) = 0 (or S(1.2) = 0) it is GENROU unsaturated. The same
+    structure in OpenIPSL ``GENROE`` (BSD-3, validated against PSS/E).
+
+    States: E'q, psi_kd, E'd, psi_kq, delta, omega (machine base pu, seconds).
+    """
+
+    def _saturation(self, x):
+        return exponential_saturation(x, self.s10, self.s12)
+
+
+class GENSAE(AbstractMachine):
+    """PSS/E GENSAE: salient pole, two d-axis and one q-axis rotor circuit, exponential
+    saturation (PSS/E Model Library, GENSAE).
+
+    GENSAL's circuits (:class:`GENSAL`), but the saturation S(|psi''|) = B |psi''|^A
+    (:func:`exponential_saturation`) is a function of the subtransient flux magnitude, as
+    GENROE's, and acts on both axes: d axis ``LadIfd += S psi''_d``; q axis
+    ``T''qo dpsi''_q/dt = -psi''_q + (Xq - X'') i_q - (Xq - Xl)/(Xd - Xl) S psi''_q``. (The
+    same formulation in OpenIPSL ``GENSAE``, validated against PSS/E; GENSAL saturates
+    E'q on the d axis only.) As :class:`GENSAL`, records are used as given where the
+    equations can be evaluated (X'd and Xd other than Xl).
+
+    States: E'q, psi_kd, psi''q, delta, omega (machine base pu, seconds).
+    """
+
+    td0_1_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T'do [s]."""
+    td0_2_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T''do [s]."""
+    tq0_2_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T''qo [s]."""
+    h_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """Inertia constant H [MW s / MVA]."""
+    d_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Damping D [pu torque / pu speed]."""
+    xd_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Xd [pu]."""
+    xq_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Xq [pu]."""
+    xd1_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """X'd [pu]."""
+    x2_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """X''d = X''q [pu]."""
+    xl_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Leakage reactance Xl [pu]."""
+    s10: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.0) [pu]."""
+    s12: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.2) [pu]."""
+    ra_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Armature resistance Ra [pu]."""
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * jnp.pi * 60.0)
+    """Nominal electrical angular speed [rad/s]."""
+
+    def __check_init__(self):
+        check_positive(self, "td0_1_s", "td0_2_s", "tq0_2_s", "h_s", "xd_pu", "xq_pu", "xd1_pu",
+                       "x2_pu", "omega_s_rad_s")
+        check_nonnegative(self, "xl_pu", "s10", "s12", "ra_pu")
+        if concrete(self.xd_pu) and concrete(self.xl_pu):
+            ok = (self.xd1_pu != self.xl_pu) & (self.xd_pu != self.xl_pu)
+            _check_order(self, ok, "needs X'd and Xd other than Xl (the equations divide by "
+                         "X'd - Xl and Xd - Xl)")
+
+    @property
+    def n_states(self) -> int:
+        return 5
+
+    def _k(self):
+        xl, x2 = self.xl_pu, self.x2_pu
+        k3d = (x2 - xl) / (self.xd1_pu - xl)
+        k1d = (self.xd1_pu - x2) * (self.xd_pu - self.xd1_pu) / (self.xd1_pu - xl) ** 2
+        kq = (self.xq_pu - xl) / (self.xd_pu - xl)
+        return k1d, k3d, kq
+
+    def _saturation(self, x):
+        return exponential_saturation(x, self.s10, self.s12)
+
+    def steady_state(self, v_re, v_im, i_re, i_im) -> MachineSteady:
+        ra, x2, xl = self.ra_pu, self.x2_pu, self.xl_pu
+        _, _, kq = self._k()
+        sat = self._saturation(jnp.hypot(v_re + ra * i_re - x2 * i_im, v_im + ra * i_im + x2 * i_re))
+        xq_sat = x2 + (self.xq_pu - x2) / (1.0 + kq * sat)
+        delta = jnp.arctan2(v_im + ra * i_im + xq_sat * i_re, v_re + ra * i_re - xq_sat * i_im)
+        vd, vq = to_dq(v_re, v_im, delta)
+        i_d, i_q = to_dq(i_re, i_im, delta)
+        psi2d = vq + ra * i_q + x2 * i_d
+        psi2q = vd + ra * i_d - x2 * i_q
+        e1q = psi2d + (self.xd1_pu - x2) * i_d
+        psi_kd = e1q - (self.xd1_pu - xl) * i_d
+        efd = e1q + (self.xd_pu - self.xd1_pu) * i_d + sat * psi2d
+        te = (psi2d - x2 * i_d) * i_q + (psi2q + x2 * i_q) * i_d
+        return MachineSteady(jnp.stack([e1q, psi_kd, psi2q, delta, jnp.ones_like(delta)]), efd, te)
+
+    def _fluxes(self, state):
+        _, k3d, _ = self._k()
+        return k3d * state[0] + (1.0 - k3d) * state[1], state[2]
+
+    def terminal(self, state, v_re, v_im) -> Terminal:
+        ra, x2 = self.ra_pu, self.x2_pu
+        e1q, psi_kd, delta = state[0], state[1], state[3]
+        k1d, _, _ = self._k()
+        psi2d, psi2q = self._fluxes(state)
+        i_d, i_q, te = _stator(psi2d, psi2q, *to_dq(v_re, v_im, delta), ra, x2)
+        sat = self._saturation(jnp.hypot(psi2d, psi2q))
+        ifd = (k1d * (e1q - psi_kd - (self.xd1_pu - self.xl_pu) * i_d) + e1q
+               + (self.xd_pu - self.xd1_pu) * i_d + sat * psi2d)
+        i_re, i_im = from_dq(i_d, i_q, delta)
+        p, q = _powers(v_re, v_im, i_re, i_im)
+        return Terminal(i_re, i_im, p, q, te, ifd)
+
+    def flux_field(self, state, v_re, v_im, out: Terminal, efd):
+        e1q, psi_kd, delta = state[0], state[1], state[3]
+        i_d, i_q = to_dq(out.i_re_pu, out.i_im_pu, delta)
+        _, _, kq = self._k()
+        psi2d, psi2q = self._fluxes(state)
+        sat = self._saturation(jnp.hypot(psi2d, psi2q))
+        return jnp.stack([
+            (efd - out.ifd_pu) / self.td0_1_s,
+            (e1q - psi_kd - (self.xd1_pu - self.xl_pu) * i_d) / self.td0_2_s,
+            (-psi2q * (1.0 + kq * sat) + (self.xq_pu - self.x2_pu) * i_q) / self.tq0_2_s,
+        ])
+
+
+GENTPJ_NEWTON_STEPS = 4
+"""GENTPJ: Newton steps on the saturation S (after one fixed-point step) that resolve the
+algebraic loop currents -> air-gap flux -> S -> saturated X'' -> currents."""
+
+
+class GENTPJ(AbstractMachine):
+    """WECC's GENTPJ (PSS/E Model Library, "GENTPJ"; WECC type J generator): a round-rotor
+    machine whose saturation scales the rotor-circuit equations and the subtransient
+    reactances, driven by the air-gap flux plus Kis times the stator current.
+
+    Saturation (PSS/E quadratic S through S(1.0), S(1.2), :func:`saturation_coefficients`)::
+
+        psi_ag = |V + (Ra + j Xl) I|               (air-gap flux, the voltage behind Xl)
+        S      = S(psi_ag + Kis |I|)
+        Sat_d  = 1 + S,   Sat_q = 1 + (Xq/Xd) S
+        X''d_sat = (X''d - Xl)/Sat_d + Xl,   X''q_sat = (X''d - Xl)/Sat_q + Xl
+
+    Rotor (states E'q, E'd, psi''d, psi''q; stator psi_d = psi''d - X''d_sat i_d, psi_q =
+    -psi''q - X''q_sat i_q, v_d = -psi_q - Ra i_d, v_q = psi_d - Ra i_q)::
+
+        T'do  dE'q/dt   = Efd - LadIfd,  LadIfd = Sat_d [E'q + (Xd - X'd)(E'q - psi''d)/(X'd - X''d)]
+        T'qo  dE'd/dt   = -Sat_q [E'd + (Xq - X'q)(E'd - psi''q)/(X'q - X''d)]
+        T''do dpsi''d/dt = Sat_d (E'q - psi''d) - (X'd - X''d) i_d
+        T''qo dpsi''q/dt = Sat_q (E'd - psi''q) + (X'q - X''d) i_q
+
+    This is the formulation of OpenIPSL ``GENTPJ`` (validated against PSS/E and PowerWorld),
+    re-derived in jaxdse's sign convention (psi''q here is -PSIppq there). With Kis = 0 it
+    is GENTPF. The saturation depends on the currents, which depend on the saturated X'':
+    the algebraic loop is solved in :meth:`terminal` by one fixed-point step and
+    ``GENTPJ_NEWTON_STEPS`` Newton steps on S (unrolled, vmappable; differentiated through
+    the last step only, by the implicit function theorem). The
+    PSS/E record has one X''d (X''q = X''d); Kis may be omitted (0). Records are used as
+    given where the equations can be evaluated (X'd and X'q other than X''d).
+
+    States: E'q, E'd, psi''d, psi''q, delta, omega (machine base pu, seconds).
+    """
+
+    td0_1_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T'do [s]."""
+    td0_2_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T''do [s]."""
+    tq0_1_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T'qo [s]."""
+    tq0_2_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """T''qo [s]."""
+    h_s: Float[Array, ""] = eqx.field(converter=as_float)
+    """Inertia constant H [MW s / MVA]."""
+    d_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Damping D [pu torque / pu speed]."""
+    xd_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Xd [pu]."""
+    xq_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Xq [pu]."""
+    xd1_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """X'd [pu]."""
+    xq1_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """X'q [pu]."""
+    x2_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """X''d = X''q (unsaturated) [pu]."""
+    xl_pu: Float[Array, ""] = eqx.field(converter=as_float)
+    """Leakage reactance Xl [pu]."""
+    s10: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.0) [pu]."""
+    s12: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.2) [pu]."""
+    kis: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kis: stator-current multiplier of the saturation input [pu flux / pu current]."""
+    ra_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Armature resistance Ra [pu]."""
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * jnp.pi * 60.0)
+    """Nominal electrical angular speed [rad/s]."""
+
+    def __check_init__(self):
+        check_positive(self, "td0_1_s", "td0_2_s", "tq0_1_s", "tq0_2_s", "h_s", "xd_pu", "xq_pu",
+                       "xd1_pu", "xq1_pu", "x2_pu", "omega_s_rad_s")
+        check_nonnegative(self, "xl_pu", "s10", "s12", "ra_pu", "kis")
+        if concrete(self.xd1_pu) and concrete(self.x2_pu) and concrete(self.xq1_pu):
+            ok = (self.xd1_pu != self.x2_pu) & (self.xq1_pu != self.x2_pu)
+            _check_order(self, ok, "needs X'd and X'q other than X''d (the equations divide by "
+                         "X'd - X''d and X'q - X''d)")
+
+    @property
+    def n_states(self) -> int:
+        return 6
+
+    def _s(self, psi_ag, i_mag):
+        a, b = saturation_coefficients(self.s10, self.s12)
+        return saturation(psi_ag + self.kis * i_mag, a, b)
+
+    def _sats(self, s):
+        """(Sat_d, Sat_q, X''d_sat, X''q_sat) for the saturation S."""
+        sat_d, sat_q = 1.0 + s, 1.0 + (self.xq_pu / self.xd_pu) * s
+        x2l = self.x2_pu - self.xl_pu
+        return sat_d, sat_q, x2l / sat_d + self.xl_pu, x2l / sat_q + self.xl_pu
+
+    def _currents(self, s, psi2d, psi2q, vd, vq):
+        """(i_d, i_q, psi_ag) behind the saturated X'' for saturation S = s."""
+        ra, xl = self.ra_pu, self.xl_pu
+        _, _, xds, xqs = self._sats(s)
+        a, b = vd - psi2q, vq - psi2d
+        det = ra ** 2 + xds * xqs
+        i_d = (-ra * a - xqs * b) / det
+        i_q = (xds * a - ra * b) / det
+        psi_ag = jnp.hypot(vq + ra * i_q + xl * i_d, vd + ra * i_d - xl * i_q)
+        return i_d, i_q, psi_ag
+
+    def _solve_saturation(self, psi2d, psi2q, vd, vq):
+        def residual(s):
+            i_d, i_q, psi_ag = self._currents(s, psi2d, psi2q, vd, vq)
+            return s - self._s(psi_ag, jnp.hypot(i_d, i_q))
+
+        def newton(s):
+            r, dr = jax.jvp(residual, (s,), (jnp.ones_like(s),))
+            return s - r / jnp.where(jnp.abs(dr) > 1e-3, dr, 1.0), r, dr
+
+        s = jnp.zeros_like(psi2d)
+        s = s - residual(s)                                   # one fixed-point step
+        for _ in range(GENTPJ_NEWTON_STEPS - 1):
+            s = newton(s)[0]
+        # derivatives by the implicit function theorem: the iterations are constants to
+        # autodiff and the last Newton step carries ds = -dr/(dr/ds) (a small program to
+        # differentiate; the value is that of one more Newton step)
+        s = jax.lax.stop_gradient(s)
+        r, dr = jax.jvp(residual, (s,), (jnp.ones_like(s),))
+        return s - r / jax.lax.stop_gradient(jnp.where(jnp.abs(dr) > 1e-3, dr, 1.0))
+
+    def steady_state(self, v_re, v_im, i_re, i_im) -> MachineSteady:
+        ra, xl = self.ra_pu, self.xl_pu
+        # the air-gap flux and |I| are frame-free: S, Sat_d, Sat_q and the X''_sat follow directly
+        psi_ag = jnp.hypot(v_re + ra * i_re - xl * i_im, v_im + ra * i_im + xl * i_re)
+        s = self._s(psi_ag, jnp.hypot(i_re, i_im))
+        sat_d, sat_q, xds, xqs = self._sats(s)
+        xq_eff = xl + (self.xq_pu - xl) / sat_q          # steady q-axis reactance
+        delta = jnp.arctan2(v_im + ra * i_im + xq_eff * i_re, v_re + ra * i_re - xq_eff * i_im)
+        vd, vq = to_dq(v_re, v_im, delta)
+        i_d, i_q = to_dq(i_re, i_im, delta)
+        psi2d = vq + ra * i_q + xds * i_d
+        psi2q = vd + ra * i_d - xqs * i_q
+        e1q = psi2d + (self.xd1_pu - self.x2_pu) * i_d / sat_d
+        e1d = psi2q - (self.xq1_pu - self.x2_pu) * i_q / sat_q
+        efd = sat_d * e1q + (self.xd_pu - self.xd1_pu) * i_d
+        te = (psi2d - xds * i_d) * i_q + (psi2q + xqs * i_q) * i_d
+        state = jnp.stack([e1q, e1d, psi2d, psi2q, delta, jnp.ones_like(delta)])
+        return MachineSteady(state, efd, te)
+
+    def _ifd(self, e1q, psi2d, sat_d):
+        return sat_d * (e1q + (self.xd_pu - self.xd1_pu) * (e1q - psi2d) / (self.xd1_pu - self.x2_pu))
+
+    def terminal(self, state, v_re, v_im) -> Terminal:
+        e1q, psi2d, psi2q, delta = state[0], state[2], state[3], state[4]
+        vd, vq = to_dq(v_re, v_im, delta)
+        s = self._solve_saturation(psi2d, psi2q, vd, vq)
+        sat_d, _, xds, xqs = self._sats(s)
+        i_d, i_q, _ = self._currents(s, psi2d, psi2q, vd, vq)
+        te = (psi2d - xds * i_d) * i_q + (psi2q + xqs * i_q) * i_d
+        i_re, i_im = from_dq(i_d, i_q, delta)
+        p, q = _powers(v_re, v_im, i_re, i_im)
+        return Terminal(i_re, i_im, p, q, te, self._ifd(e1q, psi2d, sat_d))
+
+    def flux_field(self, state, v_re, v_im, out: Terminal, efd):
+        e1q, e1d, psi2d, psi2q, delta = state[0], state[1], state[2], state[3], state[4]
+        ra, xl, x2 = self.ra_pu, self.xl_pu, self.x2_pu
+        i_re, i_im = out.i_re_pu, out.i_im_pu
+        psi_ag = jnp.hypot(v_re + ra * i_re - xl * i_im, v_im + ra * i_im + xl * i_re)
+        sat_d, sat_q, _, _ = self._sats(self._s(psi_ag, jnp.hypot(i_re, i_im)))
+        i_d, i_q = to_dq(i_re, i_im, delta)
+        ed1 = e1d + (self.xq_pu - self.xq1_pu) * (e1d - psi2q) / (self.xq1_pu - x2)
+        return jnp.stack([
+            (efd - out.ifd_pu) / self.td0_1_s,
+            -sat_q * ed1 / self.tq0_1_s,
+            (sat_d * (e1q - psi2d) - (self.xd1_pu - x2) * i_d) / self.td0_2_s,
+            (sat_q * (e1d - psi2q) + (self.xq1_pu - x2) * i_q) / self.tq0_2_s,
+        ])
+
+
+MACHINES = {"GENROU": GENROU, "GENSAL": GENSAL, "GENCLS": GENCLS, "GENROE": GENROE,
+            "GENSAE": GENSAE, "GENTPJ": GENTPJ}
 
 
 def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_pu: float | None = None,
                      f_nominal_hz: float = 60.0) -> AbstractMachine:
-    """The machine module of a GENROU, GENSAL or GENCLS record (``params``: PSS/E names, as
-    :class:`jaxdse.DyrRecord` holds them); ``ra_pu``, ``x_source_pu``: the .raw ZSORCE."""
+    """The machine module of a GENROU, GENSAL, GENCLS, GENROE, GENSAE or GENTPJ record
+    (``params``: PSS/E names, as :class:`jaxdse.DyrRecord` holds them; GENTPJ's Kis may be
+    absent: 0); ``ra_pu``, ``x_source_pu``: the .raw ZSORCE."""
     w = 2 * jnp.pi * f_nominal_hz
     p = params
     if model == "GENROU":
@@ -419,6 +748,17 @@ def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_p
         return GENSAL(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"],
                       d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], x2_pu=p["X''d"],
                       xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
+    if model in ("GENROE", "GENTPJ"):
+        extra = {"kis": p.get("Kis", 0.0)} if model == "GENTPJ" else {}
+        return MACHINES[model](
+            td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_1_s=p["T'qo"], tq0_2_s=p["T''qo"], h_s=p["H"],
+            d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], xq1_pu=p["X'q"],
+            x2_pu=p["X''d"], xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu,
+            omega_s_rad_s=w, **extra)
+    if model == "GENSAE":
+        return GENSAE(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"],
+                      d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], x2_pu=p["X''d"],
+                      xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
     if model == "GENCLS":
         if x_source_pu is None or not x_source_pu > 0:
             raise ValueError("GENCLS needs the source reactance ZSORCE X > 0 from the .raw")
@@ -426,5 +766,6 @@ def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_p
     raise ValueError(f"{model} is not a supported machine model ({', '.join(MACHINES)})")
 
 
-__all__ = ["GENCLS", "GENROU", "GENSAL", "MACHINES", "AbstractMachine", "MachineSteady", "Terminal",
-           "from_dq", "machine_from_dyr", "saturation", "saturation_coefficients", "to_dq"]
+__all__ = ["GENCLS", "GENROE", "GENROU", "GENSAE", "GENSAL", "GENTPJ", "MACHINES", "AbstractMachine",
+           "MachineSteady", "Terminal", "exponential_saturation", "from_dq", "machine_from_dyr",
+           "saturation", "saturation_coefficients", "to_dq"]

@@ -1,6 +1,7 @@
-"""PSS/E power system stabilisers IEEEST and ST2CUT: VOTHSG from one or two input signals.
+"""PSS/E power system stabilisers IEEEST, ST2CUT, PSS2A and PSS2B: VOTHSG from one or two
+input signals.
 
-Conventions (both models, PSS/E behaviour where the library states it):
+Conventions (every model, PSS/E behaviour where the library states it):
 
 * the input signal is chosen by the ICON MODE (static field) from :class:`StabiliserInputs`:
   1 rotor speed deviation [pu], 2 bus frequency deviation [pu of nominal frequency, not Hz],
@@ -19,7 +20,10 @@ Conventions (both models, PSS/E behaviour where the library states it):
   not used ("if equal zero, ignored"). |Vt| is the terminal voltage (PSS/E compares the
   compensated voltage ECOMP, which equals |Vt| without load compensation);
 * no Python branching on array values (``jnp.where``), bypassed denominators replaced by 1,
-  so neither value nor gradient is NaN; parameters are validated when concrete only.
+  so neither value nor gradient is NaN; parameters are validated when concrete only;
+* PSS2A/PSS2B: a washout s TW/(1 + s TW) with TW = 0 is bypassed (gain 1), and the
+  ramp-tracking filter keeps a fixed block of ``RTF_MAX_STAGES`` = 8 states (PSS/E's M N <= 8)
+  with the unused stages held at zero derivative (see :class:`PSS2A`).
 
 Sources: Siemens PTI, *PSS(R)E Model Library*, "IEEEST" and "ST2CUT" (block diagrams and
 CON/ICON tables); IEEE Committee Report, "Excitation system models for power system stability
@@ -28,7 +32,10 @@ studies", IEEE Trans. PAS-100 (1981) (the IEEEST stabiliser); PowerWorld Simulat
 implementations OpenIPSL ``OpenIPSL.Electrical.Controls.PSSE.PSS.IEEEST``, GridPACK
 ``st2cut.cpp`` and the GridKit IEEEST notes, and OPAL-RT's ePHASORSIM Modelica library
 (``OpalRT.Electrical.Control.Stabilizer.IEEEST/ST2CUT``, read for the block order and the
-bypass conventions; no code taken).
+bypass conventions; no code taken). PSS2A/PSS2B: Siemens PTI, *PSS(R)E Model Library*,
+"PSS2A", "PSS2B" (CON/ICON tables), IEEE Std 421.5-2016 (types PSS2A, PSS2B); the block order
+cross-read in OpenIPSL ``PSS2A``/``PSS2B``/``RampTrackingFilter`` and PowerSystems.jl's
+``PSS2B`` field list (BSD-3; no code taken).
 """
 
 from __future__ import annotations
@@ -354,6 +361,247 @@ class ST2CUT(AbstractStabiliser):
                               self.vcu_pu, self.vcl_pu)
 
 
+# --- PSS2A / PSS2B ----------------------------------------------------------------------------
+
+RTF_MAX_STAGES = 8
+"""Length of the ramp-tracking filter's state block in PSS2A/PSS2B: PSS/E allows M N <= 8
+(the same bound in OpenIPSL and PowerSimulationsDynamics.jl); the block is this long for
+every parameter set so that units with different M, N share one state layout under vmap."""
+
+
+def _check_rtf_orders(module) -> None:
+    if not all_concrete(module.m_rtf, module.n_rtf):
+        return
+    for name, v in (("M", module.m_rtf), ("N", module.n_rtf)):
+        v = np.asarray(v)
+        check_that(module, (v >= 0) & (v == np.round(v)),
+                   f"ramp-tracking filter order {name} must be an integer >= 0, got {v}")
+    mn = np.asarray(module.m_rtf) * np.asarray(module.n_rtf)
+    check_that(module, mn <= RTF_MAX_STAGES,
+               f"ramp-tracking filter M N = {mn} exceeds {RTF_MAX_STAGES} (PSS/E limit)")
+
+
+def _ramp_tracking(u, x, m, n, t8, t9, steady):
+    """[(1 + s T8)/(1 + s T9)^M]^N over the fixed block of ``RTF_MAX_STAGES`` states.
+
+    Stage j < M N is active: the first stage of each of the N sections is the lead-lag
+    (1 + s T8)/(1 + s T9), the other M - 1 are lags 1/(1 + s T9). Stages j >= M N pass their
+    input through with zero derivative. M = 0, N = 0 or T9 = 0 make the filter a gain of 1.
+    ``steady``: every stage's state set to its input (the rest state). Returns (output,
+    d(state)/dt, state used)."""
+    on = (m > 0) & (n > 0) & (t9 > 0)
+    m_safe = jnp.where(m > 0, m, 1.0)
+    y, ds, xs = u, [], []
+    for j in range(RTF_MAX_STAGES):
+        active = on & (j < m * n)
+        lead = jnp.where(jnp.mod(float(j), m_safe) == 0, t8, 0.0)
+        xj = y if steady else x[j]
+        out, d = _lead_lag(y, xj, lead, t9)
+        y = jnp.where(active, out, y)
+        ds.append(jnp.where(active, d, 0.0))
+        xs.append(xj)
+    return y, ds, xs
+
+
+class PSS2A(AbstractStabiliser):
+    """PSS/E PSS2A, the IEEE dual-input stabiliser (IEEE Std 421.5-1992/2005/2016 type PSS2A).
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "PSS2A"; IEEE Std 421.5-2016, type
+    PSS2A dual-input stabilizer; same block order in OpenIPSL ``PSS2A`` and
+    PowerSimulationsDynamics.jl ``PSS2A``)::
+
+        y1 = 1/(1 + s T6) . s TW2/(1 + s TW2) . s TW1/(1 + s TW1) . input(ICS1)
+        y2 = KS2/(1 + s T7) . s TW4/(1 + s TW4) . s TW3/(1 + s TW3) . input(ICS2)
+        r  = [(1 + s T8)/(1 + s T9)^M]^N (y1 + KS3 y2)            (ramp-tracking filter)
+        VST = clip(KS1 (1 + s T1)/(1 + s T2) (1 + s T3)/(1 + s T4) (r - y2), VSTMIN, VSTMAX)
+
+    Typical use: ICS1 = 1 (speed), ICS2 = 3 (electrical power), KS3 = 1, KS2 = T7/(2H): the
+    ``integral of accelerating power`` input; y1 + KS3 y2 is then a filtered mechanical power.
+
+    States (16): [TW1, TW2, T6, TW3, TW4, T7 blocks, ramp-tracking filter (``RTF_MAX_STAGES``
+    = 8, see :func:`_ramp_tracking`), lead-lag 1, lead-lag 2]. At constant inputs every
+    state equals its block's input and, with the washouts in, the output is 0.
+
+    Zero time constants (as PSS/E, without division by zero): a washout with TW = 0 is
+    bypassed (gain 1; PSS/E's typical PSS2A data put TW4 = 0 for a single washout on input
+    2); T6 = 0, T7 = 0 make those lags gains (1, KS2); T2 = 0, T4 = 0 bypass the lead-lags;
+    M = 0, N = 0 or T9 = 0 bypass the ramp-tracking filter. The remote-bus ICONs are
+    recorded and the inputs taken at the terminal (:attr:`remote_input_at_terminal`).
+
+    M and N are kept as array leaves (integers stored as floats), not static fields: units
+    with different filter orders share one state layout and one compiled program.
+
+    Not taken from the diagram: OpenIPSL (Laera et al., 2022) reports that PSS/E v33's
+    implementation realises the filter as N lead-lags followed by M lags; this module follows
+    the documented [(1 + s T8)/(1 + s T9)^M]^N.
+    """
+
+    mode: int = eqx.field(static=True, converter=int, default=1)
+    """ICS1: first input signal code 1..6 (see :data:`INPUT_MODES`)."""
+    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    """REMBUS1: remote bus of the first input (0: own bus); not modelled."""
+    mode2: int = eqx.field(static=True, converter=int, default=3)
+    """ICS2: second input signal code 0..6 (0: no second input)."""
+    remote_bus2: int = eqx.field(static=True, converter=int, default=0)
+    """REMBUS2: remote bus of the second input (0: own bus); not modelled."""
+    m_rtf: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
+    """M: ramp-tracking filter denominator order (integer >= 0, M N <= 8)."""
+    n_rtf: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """N: ramp-tracking filter order (integer >= 0, M N <= 8)."""
+    tw1_s: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """TW1: first washout of input 1 [s] (0: bypassed)."""
+    tw2_s: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """TW2: second washout of input 1 [s] (0: bypassed)."""
+    t6_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T6: transducer lag of input 1 [s] (0: gain 1)."""
+    tw3_s: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """TW3: first washout of input 2 [s] (0: bypassed)."""
+    tw4_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """TW4: second washout of input 2 [s] (0: bypassed)."""
+    t7_s: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """T7: transducer lag of input 2 [s] (0: gain KS2)."""
+    ks2: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """KS2: gain of input 2 [pu/pu] (typically T7/(2H))."""
+    ks3: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """KS3: gain of input 2 into the ramp-tracking filter [-]."""
+    t8_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """T8: ramp-tracking filter lead [s]."""
+    t9_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """T9: ramp-tracking filter lag [s] (0: filter bypassed)."""
+    ks1: Float[Array, ""] = eqx.field(converter=as_float, default=12.0)
+    """KS1: stabiliser gain [pu output / pu input]."""
+    t1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.12)
+    """T1: first lead [s]."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """T2: first lag [s] (0: lead-lag bypassed)."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.12)
+    """T3: second lead [s]."""
+    t4_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """T4: second lag [s] (0: lead-lag bypassed)."""
+    vst_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """VSTMAX: maximum stabiliser output [pu]."""
+    vst_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.1)
+    """VSTMIN: minimum stabiliser output [pu]."""
+
+    def __check_init__(self):
+        _check_mode(self, "mode", self.mode)
+        _check_mode(self, "mode2", self.mode2, allow_zero=True)
+        _check_bus(self, "remote_bus", self.remote_bus)
+        _check_bus(self, "remote_bus2", self.remote_bus2)
+        check_nonnegative(self, *self._time_constants())
+        _check_rtf_orders(self)
+        if all_concrete(self.vst_max_pu, self.vst_min_pu):
+            check_that(self, self.vst_max_pu >= self.vst_min_pu,
+                       f"VSTMAX ({self.vst_max_pu}) must be >= VSTMIN ({self.vst_min_pu})")
+
+    def _time_constants(self):
+        return ("tw1_s", "tw2_s", "t6_s", "tw3_s", "tw4_s", "t7_s", "t8_s", "t9_s", "t1_s",
+                "t2_s", "t3_s", "t4_s")
+
+    def _lead_lags(self):
+        """(lead, lag) time constants of the output lead-lags in order."""
+        return ((self.t1_s, self.t2_s), (self.t3_s, self.t4_s))
+
+    @property
+    def n_states(self) -> int:
+        return 6 + RTF_MAX_STAGES + len(self._lead_lags())
+
+    @property
+    def remote_input_at_terminal(self) -> bool:
+        """True when a record names a remote input bus, taken here at the terminal."""
+        return self.remote_bus != 0 or (self.mode2 != 0 and self.remote_bus2 != 0)
+
+    def _inputs(self, inputs):
+        return _signal(inputs, self.mode), _signal(inputs, self.mode2)
+
+    def _path(self, state, inputs, steady=False):
+        """(VST before the output limit, d(state)/dt, the states used). ``steady``: every
+        block's state set to its input (the rest state at these inputs)."""
+        u1, u2 = self._inputs(inputs)
+        xs, ds = [], []
+
+        def block(fn, u, k, *args):
+            x = u if steady else state[k]
+            y, d = fn(u, x, *args)
+            xs.append(x)
+            ds.append(d)
+            return y
+
+        def wo(u, x, t):
+            return _washout(u, x, 1.0, t, t)
+
+        a = block(wo, u1, 0, self.tw1_s)
+        a = block(wo, a, 1, self.tw2_s)
+        y1 = block(_lag, a, 2, self.t6_s)
+        b = block(wo, u2, 3, self.tw3_s)
+        b = block(wo, b, 4, self.tw4_s)
+        y2 = block(_lag, self.ks2 * b, 5, self.t7_s)
+        r, d_r, x_r = _ramp_tracking(y1 + self.ks3 * y2, None if steady else state[6:6 + RTF_MAX_STAGES],
+                                     self.m_rtf, self.n_rtf, self.t8_s, self.t9_s, steady)
+        xs += x_r
+        ds += d_r
+        v = self.ks1 * (r - y2)
+        for k, (ta, tb) in enumerate(self._lead_lags()):
+            v = block(_lead_lag, v, 6 + RTF_MAX_STAGES + k, ta, tb)
+        return v, jnp.stack(ds), jnp.stack(xs)
+
+    def initial_state(self, inputs: StabiliserInputs):
+        return self._path(None, inputs, steady=True)[2]
+
+    def vector_field(self, state, inputs: StabiliserInputs):
+        return self._path(state, inputs)[1]
+
+    def output(self, state, inputs: StabiliserInputs):
+        vst, _, _ = self._path(state, inputs)
+        return jnp.clip(vst, self.vst_min_pu, self.vst_max_pu)
+
+
+class PSS2B(PSS2A):
+    """PSS/E PSS2B, the IEEE dual-input stabiliser of IEEE Std 421.5-2005/2016 type PSS2B.
+
+    PSS2A (see there) with the two input signals limited before their washouts and a third
+    output lead-lag (Siemens PTI *PSS/E Model Library*, "PSS2B"; IEEE Std 421.5-2016 type
+    PSS2B; same block order in OpenIPSL ``PSS2B`` and PowerSimulationsDynamics.jl)::
+
+        u1 = clip(input(ICS1), VS1MIN, VS1MAX),  u2 = clip(input(ICS2), VS2MIN, VS2MAX)
+        ... PSS2A path on u1, u2 ...
+        VST = clip(... (1 + s T3)/(1 + s T4) (1 + s T10)/(1 + s T11) ..., VSTMIN, VSTMAX)
+
+    States (17): PSS2A's 16 and the third lead-lag. T11 = 0 bypasses the third lead-lag.
+    The input limits act on the raw signals (speed deviation in pu, PELEC in pu on MBASE).
+    """
+
+    t10_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T10: third lead [s]."""
+    t11_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """T11: third lag [s] (0: lead-lag bypassed)."""
+    vs1_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.08)
+    """VS1MAX: upper limit of input 1 [pu]."""
+    vs1_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.08)
+    """VS1MIN: lower limit of input 1 [pu]."""
+    vs2_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.25)
+    """VS2MAX: upper limit of input 2 [pu]."""
+    vs2_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-1.25)
+    """VS2MIN: lower limit of input 2 [pu]."""
+
+    def __check_init__(self):   # PSS2A's checks run too (equinox runs each class's own)
+        for hi, lo, name in ((self.vs1_max_pu, self.vs1_min_pu, "VS1"),
+                             (self.vs2_max_pu, self.vs2_min_pu, "VS2")):
+            if all_concrete(hi, lo):
+                check_that(self, hi >= lo, f"{name}MAX ({hi}) must be >= {name}MIN ({lo})")
+
+    def _time_constants(self):
+        return super()._time_constants() + ("t10_s", "t11_s")
+
+    def _lead_lags(self):
+        return super()._lead_lags() + ((self.t10_s, self.t11_s),)
+
+    def _inputs(self, inputs):
+        u1, u2 = super()._inputs(inputs)
+        return (jnp.clip(u1, self.vs1_min_pu, self.vs1_max_pu),
+                jnp.clip(u2, self.vs2_min_pu, self.vs2_max_pu))
+
+
 # --- .dyr records -----------------------------------------------------------------------------
 
 STABILISER_FIELDS = {
@@ -361,11 +609,25 @@ STABILISER_FIELDS = {
                "T6", "KS", "LSMAX", "LSMIN", "VCU", "VCL"),
     "ST2CUT": ("MODE", "busr", "MODE2", "busr2", "K1", "K2", "T1", "T2", "T3", "T4", "T5", "T6",
                "T7", "T8", "T9", "T10", "LSMAX", "LSMIN", "VCU", "VCL"),
+    "PSS2A": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N", "TW1", "TW2", "T6", "TW3", "TW4",
+              "T7", "KS2", "KS3", "T8", "T9", "KS1", "T1", "T2", "T3", "T4", "VSTMAX", "VSTMIN"),
+    "PSS2B": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N", "TW1", "TW2", "T6", "TW3", "TW4",
+              "T7", "KS2", "KS3", "T8", "T9", "KS1", "T1", "T2", "T3", "T4", "T10", "T11",
+              "VS1MAX", "VS1MIN", "VS2MAX", "VS2MIN", "VSTMAX", "VSTMIN"),
 }
 """PSS/E names of each stabiliser record's constants in PSS/E order, ICONs first."""
 
-STABILISER_ICONS = {"IEEEST": ("MODE", "busr"), "ST2CUT": ("MODE", "busr", "MODE2", "busr2")}
+STABILISER_ICONS = {"IEEEST": ("MODE", "busr"), "ST2CUT": ("MODE", "busr", "MODE2", "busr2"),
+                    "PSS2A": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N"),
+                    "PSS2B": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N")}
 """The integer constants (ICONs) of each record."""
+
+_PSS2A_PARAMETERS = {
+    "mode": "ICS1", "remote_bus": "REMBUS1", "mode2": "ICS2", "remote_bus2": "REMBUS2",
+    "m_rtf": "M", "n_rtf": "N", "tw1_s": "TW1", "tw2_s": "TW2", "t6_s": "T6", "tw3_s": "TW3",
+    "tw4_s": "TW4", "t7_s": "T7", "ks2": "KS2", "ks3": "KS3", "t8_s": "T8", "t9_s": "T9",
+    "ks1": "KS1", "t1_s": "T1", "t2_s": "T2", "t3_s": "T3", "t4_s": "T4",
+    "vst_max_pu": "VSTMAX", "vst_min_pu": "VSTMIN"}
 
 STABILISER_PARAMETERS = {
     "IEEEST": {"mode": "MODE", "remote_bus": "busr", "a1_s": "A1", "a2_s2": "A2", "a3_s": "A3",
@@ -377,10 +639,13 @@ STABILISER_PARAMETERS = {
                "t5_s": "T5", "t6_s": "T6", "t7_s": "T7", "t8_s": "T8", "t9_s": "T9",
                "t10_s": "T10", "ls_max_pu": "LSMAX", "ls_min_pu": "LSMIN", "vcu_pu": "VCU",
                "vcl_pu": "VCL"},
+    "PSS2A": _PSS2A_PARAMETERS,
+    "PSS2B": {**_PSS2A_PARAMETERS, "t10_s": "T10", "t11_s": "T11", "vs1_max_pu": "VS1MAX",
+              "vs1_min_pu": "VS1MIN", "vs2_max_pu": "VS2MAX", "vs2_min_pu": "VS2MIN"},
 }
 """Field of the stabiliser module (``STABILISERS[model]``) -> the PSS/E constant it takes."""
 
-STABILISERS = {"IEEEST": IEEEST, "ST2CUT": ST2CUT}
+STABILISERS = {"IEEEST": IEEEST, "ST2CUT": ST2CUT, "PSS2A": PSS2A, "PSS2B": PSS2B}
 
 
 def stabiliser_from_dyr(model: str, constants: Sequence[float]) -> AbstractStabiliser:
@@ -410,5 +675,5 @@ def stabiliser_from_dyr(model: str, constants: Sequence[float]) -> AbstractStabi
     return STABILISERS[model](**kwargs)
 
 
-__all__ = ["IEEEST", "INPUT_MODES", "ST2CUT", "STABILISERS", "STABILISER_FIELDS",
-           "STABILISER_ICONS", "STABILISER_PARAMETERS", "stabiliser_from_dyr"]
+__all__ = ["IEEEST", "INPUT_MODES", "PSS2A", "PSS2B", "RTF_MAX_STAGES", "ST2CUT", "STABILISERS",
+           "STABILISER_FIELDS", "STABILISER_ICONS", "STABILISER_PARAMETERS", "stabiliser_from_dyr"]
