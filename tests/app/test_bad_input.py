@@ -1,12 +1,14 @@
 """The bad-input table: realistic mistakes in a recording or its config, run through `jaxdse run`.
 
 Every case starts from one clean recording (60 s at 25 frames/s, written as CSV with a TOML
-config) and ends in exactly one of two outcomes:
+config) and ends in exactly one of three outcomes:
 
 * **error**: exit status 2 and ONE line on stderr that names the file (and the column, key or
   row where that makes sense);
 * **handled**: exit status 0, a ``data_quality`` entry in summary.json that says what was
-  handled, and H within 2 % of the clean run.
+  handled, and H within 2 % of the clean run;
+* **flagged**: exit status 0 and the flag in the recording's summary entry (a verdict reason or
+  a ``data_quality`` note); an H more than 10 % off the clean run is never ``identified``.
 
 Anything else fails, in particular an H more than 10 % off the clean run without a flag.
 Cases run in-process and keep the recording's length (one padded shape), so the estimator
@@ -63,9 +65,11 @@ CONJUGATE = ("swapping the angle columns conjugates S (P kept, Q negated): the d
 class Case:
     what: str
     expect: str
-    """"error": words that the one-line message must hold; "handled": a data_quality path."""
+    """"error": words that the one-line message must hold; "handled": a data_quality path;
+    "flagged": a path in the recording's summary entry."""
     check: tuple
-    """error: substrings of the message; handled: (data_quality path, substring or None)."""
+    """error: substrings of the message; handled: (data_quality path, substring or None);
+    flagged: (summary entry path, substring or None)."""
     cols: Callable | None = None
     """Clean columns -> damaged columns (written with jd.write_csv)."""
     text: Callable | None = None
@@ -80,7 +84,10 @@ class Case:
     plant: str = ""
     file: str = "pmu.csv"
     recording: str = "clean"
-    """"clean" (50 Hz, 25 frames/s) or "us60" (60 Hz, 30 frames/s, same length)."""
+    """"clean" (50 Hz, 25 frames/s), "us60" (60 Hz, 30 frames/s, same length) or "part60" (the
+    clean plant at 60 % load)."""
+    absent: tuple = ()
+    """error: substrings the message must not hold (a hint for another config)."""
     known: str | None = None
     """Why the case ends in neither outcome yet (a strict xfail, listed in the table)."""
 
@@ -91,6 +98,10 @@ def error(what, *words, **kw):
 
 def handled(what, path, word=None, **kw):
     return Case(what, "handled", (path, word), **kw)
+
+
+def flagged(what, path, word=None, **kw):
+    return Case(what, "flagged", (path, word), **kw)
 
 
 def edit(**changes):
@@ -146,6 +157,15 @@ def timestamps(fmt, tz_half=False):
                     stamp += "+00:00"
                 lines[r] = f"{stamp},{rest}"
         return "\n".join(lines)
+    return apply
+
+
+def text_column(name, word):
+    """CSV text with a column ``name`` of ``word`` in every data row (e.g. a PMU STAT column
+    exported as text)."""
+    def apply(text):
+        lines = text.split("\n")
+        return "\n".join(f"{ln},{name if r == 0 else word}" if ln else ln for r, ln in enumerate(lines))
     return apply
 
 
@@ -318,6 +338,62 @@ CASES = {
                                cols=lambda c: dict(c, valid=1.0 * ((np.arange(c["t"].size) // 5) != 80))),
     "s_declared_ms": error("time in s, time_unit = \"ms\"", "pmu.csv", "column 't'", "seconds",
                            extra='time_unit = "ms"'),
+    # --- plausibility against the plant's stated maximum and typical machine data (issue 32)
+    "current_peak_full_load": error("current logged as peak instead of RMS (x1.414) at 77 % load",
+                                    "pmu.csv", "column 'IM'", "row 2-1502", "p_sg_max_mw",
+                                    "peak instead of RMS", cols=edit(IM=lambda c: c["IM"] * np.sqrt(2))),
+    "current_peak_part_load": flagged("current logged as peak instead of RMS (x1.414) at 60 % load "
+                                      "(0.85 pu: under every rating check)", "reasons.power_above_droop",
+                                      "peak instead of RMS", recording="part60",
+                                      cols=edit(IM=lambda c: c["IM"] * np.sqrt(2))),
+    "reactance_percent": error("machine.xd_pu = 180 (percent)", "c.toml", "key 'machine.xd_pu'",
+                               "looks like percent: 180 -> 1.8 pu?", plant="[machine]\nxd_pu = 180.0\n"),
+    "resistance_percent": error("machine.rs_pu = 0.3 (percent)", "c.toml", "key 'machine.rs_pu'",
+                                "looks like percent", plant="[machine]\nrs_pu = 0.3\n"),
+    "reactance_atypical": flagged("machine.xd1_pu = 0.6, outside the typical 0.1-0.5 pu",
+                                  "data_quality.plant_data", "X'd = 0.6", plant="[machine]\nxd1_pu = 0.6\n"),
+    # --- inputs as real exports come (issue 32) ----------------------------------------------
+    "stat_text_column": handled("an unmapped STAT column holding '0x0000' text", "unmapped_columns",
+                                "STAT", text=text_column("STAT", "0x0000")),
+    "status_word_column": handled("an unmapped column of words ('OK')", "unmapped_columns", "Status",
+                                  text=text_column("Status", "OK")),
+    "stat_hex_mapped": handled("C37.118 STAT as hexadecimal text, 5 frames '0x8000' (data error)",
+                               "screening.stat_invalid.STAT", columns=dict(COLS, stat="STAT"),
+                               text=lambda s: cells("STAT", 400, 404, "0x8000")(
+                                   text_column("STAT", "0x0000")(s))),
+    "frequency_deviation_declared": handled("frequency column holds the deviation in mHz, "
+                                            "frequency_kind = \"deviation\", frequency_unit = \"mHz\"",
+                                            "units.frequency", "deviation",
+                                            cols=edit(f=lambda c: (c["f"] - 50.0) * 1e3),
+                                            extra='frequency_kind = "deviation"\nfrequency_unit = "mHz"'),
+    "frequency_deviation_pu_declared": handled("frequency column holds the deviation in pu, declared",
+                                               "units.frequency", "in pu",
+                                               cols=edit(f=lambda c: c["f"] / 50.0 - 1.0),
+                                               extra='frequency_kind = "deviation"\nfrequency_unit = "pu"'),
+    "frequency_deviation_mHz_declared_Hz": error("deviation in mHz, frequency_kind = \"deviation\" in Hz",
+                                                 "pmu.csv", "column 'f'", "frequency_unit = \"mHz\"",
+                                                 cols=edit(f=lambda c: (c["f"] - 50.0) * 1e3),
+                                                 extra='frequency_kind = "deviation"'),
+    "frequency_absolute_declared_deviation": error("frequency in Hz, frequency_kind = \"deviation\"",
+                                                   "pmu.csv", "column 'f'",
+                                                   "leave measurement.frequency_kind out",
+                                                   extra='frequency_kind = "deviation"'),
+    "no_plant_data": error("no plant section at all, no plant_defaults", "c.toml", "[line], [transformer], "
+                           "[aux], [machine] and [governor] sections", "s_rated_mva", top=""),
+    "into_plant_declared_reversed": error("current_direction = \"into_plant\" set, the current flows out",
+                                          "pmu.csv", "column 'IM'", "already set", "CT polarity",
+                                          extra='current_direction = "into_plant"',
+                                          absent=('set measurement.current_direction = "into_plant"',)),
+    "12_hour_clock": error("03/01/2024 11:00:00.000 AM timestamps, no time_format", "pmu.csv", "column 't'",
+                           "row 2", "%I:%M:%S.%f %p", text=timestamps("%m/%d/%Y %I:%M:%S.%f %p"),
+                           absent=("%H:%M",)),
+    "12_hour_clock_format_H": error("AM/PM timestamps, time_format with %H", "pmu.csv", "column 't'",
+                                    "12-hour clock", "%m/%d/%Y %I:%M:%S.%f %p",
+                                    text=timestamps("%m/%d/%Y %I:%M:%S.%f %p"),
+                                    extra='time_format = "%m/%d/%Y %H:%M:%S.%f"'),
+    "12_hour_clock_with_format": handled("AM/PM timestamps, time_format with %I and %p", "units.time",
+                                         "%p", text=timestamps("%m/%d/%Y %I:%M:%S.%f %p"),
+                                         extra='time_format = "%m/%d/%Y %I:%M:%S.%f %p"'),
     # --- config mistakes ------------------------------------------------------------------
     "unit_typo": error("voltage_unit = \"kW\"", "c.toml", "key 'measurement.voltage_unit'", "'kW'",
                        extra='voltage_unit = "kW"'),
@@ -336,7 +412,9 @@ def recordings(pmu25):
     spec = jd.MeasurementSpec(file=(), columns=COLS, v_base_kv=400.0)
     us = jd.simulate(jd.Plant(machine=jd.Machine(f_nominal_hz=60.0)),
                      jd.Scenario(duration_s=50.0, frame_rate_hz=30.0, seed=8))
-    out = {"clean": jd.phasor_columns(pmu25.recording, spec), "us60": jd.phasor_columns(us.recording, spec)}
+    part = jd.simulate(jd.Plant(), jd.Scenario(duration_s=60.0, frame_rate_hz=25.0, seed=8, p_pu=0.6))
+    out = {"clean": jd.phasor_columns(pmu25.recording, spec), "us60": jd.phasor_columns(us.recording, spec),
+           "part60": jd.phasor_columns(part.recording, spec)}
     assert {len(c["t"]) for c in out.values()} == {1501}
     return out
 
@@ -411,11 +489,25 @@ def test_bad_input(name, tmp_path, recordings, clean_run):
     kind, result, h = outcome(rc, err, summary, clean_run["H_s"])
     if kind == "error":
         TABLE[name] = (case.what, "exit 2", result.replace(f"{tmp_path}/", ""), None, case.known)
-        assert case.expect == "error", f"expected {case.check[0]} to be handled, got: {result}"
+        assert case.expect == "error", f"expected {case.check[0]} to be {case.expect}, got: {result}"
         missing = [w for w in case.check if w not in result]
         assert not missing, f"{result!r} lacks {missing}"
+        wrong = [w for w in case.absent if w in result]
+        assert not wrong, f"{result!r} holds {wrong}, a hint for another config"
         return
     path, word = case.check
+    if case.expect == "flagged":
+        note = lookup(result, path)
+        TABLE[name] = (case.what, f"exit 0, {result['verdict']} (flagged)",
+                       f"`{path}`: {json.dumps(note)}" if note is not None else "", h, case.known)
+        rel = abs(h / clean_run["H_s"] - 1)
+        assert not (rel > H_WRONG and result["verdict"] == "identified"), \
+            f"silent wrong H: {h:.4g} s against {clean_run['H_s']:.4g} s, verdict identified"
+        assert note not in (None, 0, "", [], {}), f"no {path!r} in the summary entry: {result}"
+        assert lookup(clean_run, path) is None, f"{path!r} is in the clean run too"
+        if word is not None:
+            assert word in str(note), f"{path} = {note!r} lacks {word!r}"
+        return
     note = lookup(result["data_quality"], path) if case.expect == "handled" else None
     TABLE[name] = (case.what, f"exit 0, {result['verdict']}",
                    f"`{path}`: {json.dumps(note)}" if note is not None else "", h, case.known)
@@ -429,7 +521,7 @@ def test_bad_input(name, tmp_path, recordings, clean_run):
 
 def test_table_has_enough_cases():
     assert len(CASES) >= 30
-    assert {c.expect for c in CASES.values()} == {"error", "handled"}
+    assert {c.expect for c in CASES.values()} == {"error", "handled", "flagged"}
 
 
 @pytest.fixture(scope="module", autouse=True)

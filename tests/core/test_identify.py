@@ -146,6 +146,9 @@ CASES = {
     "negative_damping": ({"identified__d_ci95": [-3.0, -1.5], "identified__d_pu_s": -2.0}, 0),
     "d_interval_wide": ({"identified__d_ci95": [-10.0, 10.0]}, 0),
     "governor_model_off": ({"identified__governor_gain_error": -0.6}, 0),
+    # the power answers the frequency 1.41x as strongly as the droop allows (peak for RMS current)
+    "power_above_droop": ({"identified__governor_gain_error": 0.41,
+                           "identified__covariance": jnp.diag(jnp.array([1e-6] * 4))}, 1),
     "drem_not_converged": ({"estimate__converged": False}, 0),
 }
 
@@ -176,6 +179,6 @@ def test_playback_diverged_and_drem_bits(assessed):
     assert set(CASES) | {"drem_contradicts", "drem_disagrees"} == set(REASONS)
     # an alternative the data reject (a coefficient far from 0 with confidence) is no assumption
     sure = _with(assessed, identified__h_without_governor_correction_s=100.0,
-                 identified__governor_gain_error=0.4, identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))
+                 identified__governor_gain_error=0.2, identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))
     v = verdict(sure.estimate, sure.identified, sure.replay)
     assert not int(v.reasons) & _BIT["h_rests_on_governor"] and int(v.code) == 0

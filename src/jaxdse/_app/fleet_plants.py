@@ -7,7 +7,11 @@ governor records. Every plant gets the same governor slots (zero weight where a 
 fewer units of a type), so that all plants share one pytree structure.
 
 Every unit is checked on its own (:func:`plant_units`): a unit whose records are malformed,
-missing or implausible makes its plant a skipped one, with the reason in one line; where a
+missing or implausible (a reactance in percent: more than 10 x its typical range) makes its
+plant a skipped one, with the reason in one line; data merely outside their typical range are
+used as given and listed in the plant's ``GeneratorRun.notes``; the plant's stated maximum
+active power (its units' .raw PT, its governors' maximum) goes with its measurement (a
+recording above it is refused, which skips the plant); where a
 standard fallback exists the unit runs with it and says so in the plant's notes (q-axis
 circuits with X''d not above Xl, above X'q, or X'q above Xq: left out, the transient model;
 no governor record, or one jaxdse does not model: constant mechanical torque; a second record
@@ -26,7 +30,7 @@ import numpy as np
 from .._core.machine import Machine, QAxisCircuits
 from .._core.mapping import AuxiliarySystem, Transformer
 from .._core.plant import Plant
-from .._io.config import GeneratorRun
+from .._io.config import GeneratorRun, governor_max_pu
 from .._io.errors import InputError
 from .._io.psse import (
     PSSE_GOVERNOR_MODELS,
@@ -43,7 +47,11 @@ from .._io.psse import (
     transformer_kwargs,
     transient_data,
 )
+from .._io.schema import TYPICAL_MACHINE, machine_value_findings
 from .._models.governors import GOVERNORS, WeightedGovernor
+
+PT_UNLIMITED_MW = 9999.0
+"""PSS/E's default PT (maximum active power) of a generator record: no stated maximum [MW]."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -70,6 +78,9 @@ class UnitData:
     """Its typed governor record (None: constant mechanical torque)."""
     q_axis: bool
     """Whether its q-axis circuit data are there and usable (GENROU, GENTPJ)."""
+    atypical: tuple[str, ...] = ()
+    """Its machine data outside their typical range (``schema.TYPICAL_MACHINE``), used as given:
+    one line each, naming the record and the value (the plant's ``GeneratorRun.notes``)."""
 
 
 @dataclasses.dataclass
@@ -137,7 +148,11 @@ def _check_unit(raw: RawCase, dyr: DyrData, g: RawGenerator, out: PlantUnits) ->
     for extra in machines[1:]:
         notes.append(f"{record_label(extra)}: a second machine record for this machine; the "
                      f"first ({rec.model} at line {rec.line}) is used")
-    problems = machine_problems(rec, g)
+    problems, flagged = machine_problems(rec, g), []
+    if not rec.problem:   # its data against typical ranges: percent refused, atypical flagged
+        values = {k: v for k, v in rec.params.items() if k in TYPICAL_MACHINE}
+        refused, flagged = machine_value_findings({**values, "Ra": g.zr_pu})
+        problems += [f"{record_label(rec)}: {r}" for r in refused]
     try:
         raw.bus_kv(g.bus)
     except InputError as e:
@@ -171,7 +186,8 @@ def _check_unit(raw: RawCase, dyr: DyrData, g: RawGenerator, out: PlantUnits) ->
     out.units.append(UnitData(
         member=Member(id=g.id, model=rec.model, mbase_mva=g.mbase_mva, h_s=rec["H"],
                       governor=gov.model if gov is not None else None),
-        generator=g, machine=rec, governor=gov, q_axis=q_axis))
+        generator=g, machine=rec, governor=gov, q_axis=q_axis,
+        atypical=tuple(f"{record_label(rec)}: {f}" for f in flagged)))
 
 
 def governor_sets(units: list[UnitData]) -> dict:
@@ -239,6 +255,7 @@ def generator_run(name, bus, units: list[UnitData], spec, raw: RawCase,
         tuple(by_slot[k][0] if k in by_slot else GOVERNORS[t]() for k, t in enumerate(slots)),
         [by_slot[k][1] if k in by_slot else 0.0 for k in range(len(slots))])
     plant = Plant(machine=machine, governor=governor, s_base_mva=spec.s_base_mva)
+    spec = dataclasses.replace(spec, **_p_max(units, governor, s))
     if spec.location == "hv":
         gsu = raw.step_up_transformer(bus)
         if gsu is None:
@@ -247,7 +264,26 @@ def generator_run(name, bus, units: list[UnitData], spec, raw: RawCase,
         plant = eqx.tree_at(lambda p: (p.transformer, p.aux), plant,
                             (Transformer(**transformer_kwargs(gsu, raw)), AuxiliarySystem(p_as_max_mw=0.0)))
     return GeneratorRun(name=name, role="estimate", measurement=spec, plant=plant,
-                        h_reference_s=float(machine.h_s)), notes
+                        h_reference_s=float(machine.h_s),
+                        notes=tuple(f for u in units for f in u.atypical)), notes
+
+
+def _p_max(units: list[UnitData], governor, s_mva: float) -> dict:
+    """The plant's stated maximum active power (``MeasurementSpec.p_max_mw``, ``p_max_source``):
+    the smaller of the sum of its units' .raw PT (where every unit states one) and its governors'
+    maximum on the plant's MBASE (where every unit has a governor record)."""
+    found = []
+    pts = [u.generator.pt_mw for u in units]
+    if all(0 < pt < PT_UNLIMITED_MW for pt in pts):
+        found.append((float(sum(pts)), "the PT of its unit" + ("s" if len(pts) > 1 else "") + " in "
+                      + Path(units[0].generator.source).name))
+    gm = governor_max_pu(governor)
+    if gm is not None:
+        found.append((gm * s_mva, f"its governor records' maximum, {gm:.3g} pu of MBASE {s_mva:g} MVA"))
+    if not found:
+        return {}
+    p_max, source = min(found)
+    return {"p_max_mw": p_max, "p_max_source": source}
 
 
 def _line(err) -> str:

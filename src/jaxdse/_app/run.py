@@ -40,6 +40,8 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
     units, gens, qualities = [], [], []
     for g in cfg.generators:
         segments, quality = read_measurement(g.measurement, g.plant.machine)
+        if g.notes:   # plant data outside their typical range, used as given
+            quality["plant_data"] = list(g.notes)
         for k, (t0, rec) in enumerate(segments):
             units.append(Unit(g.name if len(segments) == 1 else f"{g.name}_part{k + 1}", rec, g.plant, t0,
                               g.a2_reference))
@@ -62,6 +64,9 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
             inputs.setdefault(f, None)
         decisive = [k for k in entry["reasons"] if k not in NOTES]
         status = entry["verdict"] if not decisive else f"{entry['verdict']}: {decisive[0].replace('_', ' ')}"
+        if g.notes:   # a note beside the verdict, not a reason of it
+            entry["reasons"]["atypical_plant_data"] = "plant data outside the typical range, used as " \
+                "given: " + "; ".join(g.notes)
         if entry["verdict"] != "identified":
             why = "; ".join(v for k, v in entry["reasons"].items() if k not in NOTES) or "see summary.json"
             print(f"jaxdse: warning: {u.name}: {entry['verdict']}: {why}", file=stream)

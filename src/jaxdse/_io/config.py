@@ -55,6 +55,7 @@ from .measurement import MeasurementSpec
 from .schema import (
     governor_section,
     identify_section,
+    machine_checks,
     measurement_section,
     module_section,
     no_unknown,
@@ -87,6 +88,9 @@ class GeneratorRun:
     h_reference_s: float | None = None
     defaults_used: tuple[str, ...] = ()
     """Plant values the config left out, taken from the defaults ("section.key")."""
+    notes: tuple[str, ...] = ()
+    """Plant data used as given but outside their typical range (one line each, naming the key
+    or record and the value): in ``data_quality["plant_data"]`` and the verdict's reasons."""
 
 
 @dataclass(frozen=True)
@@ -146,6 +150,7 @@ def parse_config(data: dict, path: Path) -> RunConfig:
     # The shared sections alone first, so that their errors name their own keys.
     for sec, cls in PLANT_MODULES.items():
         module_section(path, cls, base[sec], sec)
+    base_notes = machine_checks(path, base["machine"], "")
     governor_section(path, base["governor"], "")
     measurement_section(path, base["measurement"], 50.0, "", partial=True)
 
@@ -174,6 +179,9 @@ def parse_config(data: dict, path: Path) -> RunConfig:
             if k in g:
                 refs[k] = positive_number(path, g[k], prefix + k)
         defaults = _plant_defaults(path, merged, prefix, paper == "paper")
+        own = subtable(path, g, "machine", prefix + "machine")
+        notes = [n for n in base_notes if n.split(":")[0].removeprefix("machine.") not in own] + \
+            (machine_checks(path, own, prefix) if prefix else [])
         machine = module_section(path, Machine, merged["machine"], "machine", prefix)
         plant = Plant(machine=machine,
                       line=module_section(path, Line, merged["line"], "line", prefix),
@@ -183,8 +191,11 @@ def parse_config(data: dict, path: Path) -> RunConfig:
                       governor=governor_section(path, merged["governor"], prefix),
                       s_base_mva=merged["measurement"].get("s_base_mva", 100.0))
         spec = measurement_section(path, merged["measurement"], float(machine.f_nominal_hz), prefix)
+        p_max, source = plant_p_max(plant, merged, merged["governor"].get("model", "TGOV1"), defaults,
+                                    "aux" in _sections_needed(spec.location))
+        spec = dataclasses.replace(spec, p_max_mw=p_max, p_max_source=source)
         runs.append(GeneratorRun(name=name, role=role, measurement=spec, plant=plant,
-                                 defaults_used=defaults, **refs))
+                                 defaults_used=defaults, notes=tuple(notes), **refs))
     out_dir = Path(out.get("dir", "jaxdse_out"))
     identify, verdict = identify_section(path, subtable(path, data, "identify", "identify"))
     return RunConfig(path=path, generators=tuple(runs), observer=observer, settings=settings,
@@ -206,17 +217,27 @@ def _plant_defaults(path, merged: dict, prefix: str, paper: bool) -> tuple[str, 
     must be in the config unless it opts into the paper's plant. Returns what was defaulted."""
     location = merged["measurement"].get("location", "substation")
     needed = _sections_needed(location)
-    if not paper:
-        for sec in needed:
-            if not merged[sec]:
-                raise InputError(path, f"no [{sec}] section, which a PMU at location = {location!r} "
-                                 "needs: jaxdse does not guess plant data; give it, or set "
-                                 "plant_defaults = \"paper\" to use the paper's plant",
-                                 key=prefix + sec)
-        for k in MACHINE_RATING_KEYS:
-            if k not in merged["machine"]:
-                raise InputError(path, "is required: the machine's rating (s_rated_mva, "
-                                 "v_rated_kv, f_nominal_hz) is never defaulted", key=f"{prefix}machine.{k}")
+    if not paper:   # everything missing in one message, not one per run
+        sections = [sec for sec in PLANT_SECTIONS if sec in needed and not merged[sec]]
+        rating = [k for k in MACHINE_RATING_KEYS if merged["machine"] and k not in merged["machine"]]
+        if len(sections) + len(rating) == 1 and rating:
+            raise InputError(path, "is required: the machine's rating (s_rated_mva, v_rated_kv, "
+                             "f_nominal_hz) is never defaulted", key=f"{prefix}machine.{rating[0]}")
+        if sections or rating:
+            what = []
+            if sections:
+                what.append(f"no {_listing([f'[{sec}]' for sec in sections])} "
+                            f"section{'s' if len(sections) > 1 else ''}, which a PMU at location = "
+                            f"{location!r} needs" + (f" (for {prefix.rstrip('.')})" if prefix else ""))
+            if "machine" in sections:
+                what.append("[machine] needs the machine's rating (s_rated_mva, v_rated_kv, "
+                            "f_nominal_hz)")
+            elif rating:
+                what.append(f"no {_listing([f'{prefix}machine.{k}' for k in rating])} (the machine's "
+                            "rating is never defaulted)")
+            raise InputError(path, "; ".join(what) + ": jaxdse does not guess plant data; give them, "
+                             "or set plant_defaults = \"paper\" to use the paper's plant",
+                             key=prefix + sections[0] if len(sections) == 1 and not rating else None)
     used = []
     for sec in needed:
         cls = GOVERNORS.get(merged["governor"].get("model", "TGOV1")) if sec == "governor" \
@@ -226,6 +247,46 @@ def _plant_defaults(path, merged: dict, prefix: str, paper: bool) -> tuple[str, 
         used += [f"{sec}.{f.name}" for f in dataclasses.fields(cls)
                  if f.name not in merged[sec] and f.name not in ESTIMATED_MACHINE_KEYS]
     return tuple(used)
+
+
+def _listing(items: list[str]) -> str:
+    """"a", "a and b", "a, b and c"."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
+def governor_max_pu(governor) -> float | None:
+    """The governor-turbine's largest steady mechanical power [pu of the machine (plant) base]:
+    its own steady state at full reference, as each model defines it (TGOV1 VMAX, IEEEG1 PMAX
+    (K1 + K3 + K5 + K7), GAST min(VMAX, AT), HYGOV At (GMAX - qNL), GGOV1 Kturb (VMAX - Wfnl)
+    within its load limit; a plant's units summed with their MBASE shares). None: no bound (a
+    unit of the plant without a governor record holds its torque whatever it is)."""
+    try:
+        tm = float(governor.torque(governor.steady_state(FULL_REFERENCE, 0.0), 0.0))
+    except (TypeError, ValueError):   # a batched or traced governor: not checked
+        return None
+    return tm if 0 < tm < FULL_REFERENCE / 10 else None
+
+
+FULL_REFERENCE = 1e3
+"""A torque (or speed) reference far beyond any limit [pu]: the governor's steady state there
+is its maximum."""
+
+
+def plant_p_max(plant: Plant, merged: dict, governor_model: str, defaults: tuple[str, ...],
+                aux_needed: bool) -> tuple[float | None, str]:
+    """The plant's stated maximum active power [MW] and where it comes from: the smaller of
+    [aux] p_sg_max_mw (where the config gives it, or plant_defaults = "paper" fills the [aux]
+    the PMU location needs) and the governor's maximum on the machine rating."""
+    found = []
+    if "p_sg_max_mw" in merged["aux"] or (aux_needed and "aux.p_sg_max_mw" in defaults):
+        found.append((float(plant.aux.p_sg_max_mw), "[aux] p_sg_max_mw" + (
+            "" if "p_sg_max_mw" in merged["aux"] else ", the paper's plant (plant_defaults)")))
+    gm = governor_max_pu(plant.governor)
+    if gm is not None:
+        s = float(plant.machine.s_rated_mva)
+        found.append((gm * s, f"the {governor_model} governor's maximum, {gm:.3g} pu of "
+                      f"machine.s_rated_mva = {s:g} MVA"))
+    return min(found) if found else (None, "")
 
 
 def _param_names(path, names, key):

@@ -3,19 +3,24 @@
 Applied at the edge, in NumPy, in this order:
 
 1. pick the columns (positive-sequence magnitude/angle, or three-phase a/b/c magnitude/angle;
-   optionally the frequency and a C37.118 STAT word or a data-valid flag);
+   optionally the frequency and a C37.118 STAT word or a data-valid flag); the columns the
+   config does not map are ignored, whatever they hold, and listed (``unmapped_columns``);
 2. time: seconds, milliseconds or timestamps (ISO 8601, or ``time_format``, in ``timezone``);
    rows with no time are dropped, out-of-order rows sorted, duplicated timestamps dropped
    (the first row is kept); the frame rate must lie in 1-240 frames/s;
 3. units: voltage kV/V phase-to-phase or phase-to-ground or pu, current A/kA/pu, angles
    deg/rad, converted to pu of the system base (``s_base_mva``, ``v_base_kv`` phase-to-phase);
-   three-phase -> positive sequence; current direction -> generator convention;
+   three-phase -> positive sequence; current direction -> generator convention; frequency
+   Hz/mHz/pu, absolute or as a deviation from nominal (``frequency_kind``) -> Hz;
 4. plausibility of units and set-up, from medians and statistics of the whole recording:
    no stuck (constant) magnitude or frequency channel, voltage near 1 pu (which also tells
    phase-to-ground from phase-to-phase), current below 3x rating and not a power-carrying
    trickle (a unit or CT-ratio mistake), current within the machine's short-time capability
    (IEEE C50.13) and reactive power within its capability curve, no reversed power,
-   frequency near nominal, angle steps that fit the declared angle unit, the voltage-angle
+   active power within the plant's stated maximum (``p_max_mw``: a current logged as peak
+   instead of RMS at part load passes every rating check but this one, or none),
+   frequency near nominal and within a fraction of a hertz of its median, angle steps that
+   fit the declared angle unit, the voltage-angle
    drift against f_nominal, the frame rate against f_nominal (without a frequency channel),
    and the PMU voltage base against the machine's rated voltage for the declared location;
 5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, and
@@ -31,6 +36,7 @@ Everything handled is reported in ``data_quality``; everything else is an :class
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,11 +61,15 @@ GAP_POLICIES = ("split", "error")
 POSITIVE = ("v_mag", "v_ang", "i_mag", "i_ang")
 THREE_PHASE = tuple(f"{q}_{p}_{c}" for q in "vi" for c in ("mag", "ang") for p in "abc")
 COLUMN_ROLES = ("time", "frequency", "stat", "valid") + POSITIVE + THREE_PHASE
+FREQUENCY_UNITS = {"hz": 1.0, "mhz": 1e-3, "pu": None}
+"""unit -> hertz per unit (None: per unit of f_nominal)."""
+FREQUENCY_KINDS = ("absolute", "deviation")
+"""The frequency channel holds the frequency itself, or its deviation from f_nominal."""
 UNIT_KEYS = {"voltage_unit": ("kV_LL", "kV_LN", "V_LL", "V_LN", "pu"), "current_unit": ("A", "kA", "pu"),
-             "angle_unit": ("deg", "rad"), "frequency_unit": ("Hz",)}
+             "angle_unit": ("deg", "rad"), "frequency_unit": ("Hz", "mHz", "pu")}
 """Unit keys of [measurement] -> the spellings users write (matched case-insensitively)."""
 CHOICE_KEYS = {"format": FORMATS, "location": LOCATIONS, "current_direction": DIRECTIONS,
-               "on_long_gap": GAP_POLICIES, "time_unit": TIME_UNITS}
+               "on_long_gap": GAP_POLICIES, "time_unit": TIME_UNITS, "frequency_kind": FREQUENCY_KINDS}
 """Keys of [measurement] that take one of a few words (matched exactly)."""
 
 # Plausibility of units and set-up (whole recording).
@@ -96,6 +106,23 @@ MIN_POWER_PU_MACHINE = -0.05
 """Median active power [pu of the machine rating] below this: the current is reversed."""
 MAX_FREQUENCY_OFFSET = 0.1
 """Median frequency off nominal by more than this fraction of f_nominal [-]: not in Hz."""
+MAX_FREQUENCY_SPREAD_HZ = 0.5
+"""Median absolute deviation of the frequency channel from its median above this [Hz]: grids
+stay within a fraction of a hertz, so the channel's unit is wrong (a deviation in mHz read as Hz)."""
+TYPICAL_FREQUENCY_SPREAD_HZ = 0.005
+"""A grid frequency's typical median absolute deviation from its median [Hz]: of the unit
+declarations that fit a wrongly declared channel's median, the hint names the one whose
+spread comes nearest to it."""
+P_MAX_TOLERANCE = 0.05
+"""Median active power above the plant's stated maximum (``MeasurementSpec.p_max_mw``) by more
+than this fraction is refused: no turbine delivers more than its maximum [-]."""
+P_MAX_RUN_TOLERANCE = 0.10
+"""Active power above the stated maximum by more than this fraction ... [-]"""
+P_MAX_RUN_S = 30.0
+"""... for longer than this is refused too: a swing or an inertial response lasts seconds, the
+turbine cannot follow beyond its maximum for longer [s]."""
+PEAK_TO_RMS = float(np.sqrt(2.0))
+"""Peak / RMS of a sine: a current logged as peak instead of RMS is this factor too large."""
 FRAME_RATE_HZ = (1.0, 240.0)
 """Frame rates a PMU reports [frames/s]; outside: the time unit is wrong."""
 SYSTEM_RATES_HZ = {50.0: (25.0, 50.0, 100.0), 60.0: (30.0, 60.0, 120.0)}
@@ -178,6 +205,9 @@ class MeasurementSpec:
     timezone: str | None = None
     """Time zone of timestamps that carry none (e.g. "UTC", "Europe/Berlin", "+01:00")."""
     frequency_unit: str = "Hz"
+    """"Hz", "mHz" or "pu" (of f_nominal)."""
+    frequency_kind: str = "absolute"
+    """"absolute": the channel holds the frequency; "deviation": its deviation from f_nominal."""
     v_base_kv: float | None = None
     """Phase-to-phase base voltage at the PMU [kV]; needed unless voltages are in pu."""
     s_base_mva: float = 100.0
@@ -191,6 +221,12 @@ class MeasurementSpec:
     csv_options: CsvOptions = CsvOptions()
     """How to read a CSV export (separator, decimal mark, missing-value words, rows to skip,
     units row); in TOML, these are keys of [measurement] itself (``delimiter = ";"``)."""
+    p_max_mw: float | None = None
+    """The plant's stated maximum active power [MW] (plant data, not a [measurement] key: the
+    smallest of [aux] p_sg_max_mw, the governor's maximum and, in a fleet, the .raw PT of its
+    units); a measured P above it is refused. None: not checked."""
+    p_max_source: str = ""
+    """Where ``p_max_mw`` comes from, for the message (e.g. "[aux] p_sg_max_mw")."""
 
     @property
     def three_phase(self) -> bool:
@@ -223,6 +259,7 @@ def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = Non
         q["reader"] = dict(table.notes)
     raw = {role: table.column(spec.columns[role], role) for role in roles}
     names = {role: str(spec.columns[role]) for role in roles}
+    q["unmapped_columns"] = _unmapped(table, [spec.columns[r] for r in roles])
     n_rows = len(raw["time"])
     q["rows_read"] = n_rows
     rownum = np.arange(n_rows) + table.first_row
@@ -258,7 +295,7 @@ def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = Non
     q["non_uniform_steps"] = int(np.sum(np.abs(steps - dt) > 1e-6 * dt))
 
     v, i = _phasors(raw, order, spec, src, names)
-    f = raw["frequency"][order].astype(float) if "frequency" in raw else None
+    f = _frequency_hz(raw["frequency"][order], spec) if "frequency" in raw else None
     q["nan_samples"] = {names[r]: int(np.sum(~np.isfinite(raw[r][order]))) for r in raw
                         if r not in ("stat", "valid") and np.any(~np.isfinite(raw[r][order]))}
     if not np.any(np.isfinite(v) & np.isfinite(i)):
@@ -268,9 +305,35 @@ def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = Non
     segments = _segments(t, v, i, f, rows, raw, order, spec, src, names, q)
     q["units"] = {"voltage": spec.voltage_unit, "current": spec.current_unit,
                   "angle": spec.angle_unit, "time": q.pop("time_format"),
+                  "frequency": (spec.frequency_unit if spec.frequency_kind == "absolute" else
+                                f"deviation from {spec.f_nominal_hz:g} Hz in {spec.frequency_unit}")
+                  if "frequency" in raw else None,
                   "v_base_kv": spec.v_base_kv, "s_base_mva": spec.s_base_mva,
                   "current_direction": spec.current_direction}
     return segments, q
+
+
+UNMAPPED_LISTED = 20
+"""The unmapped columns listed by name in ``data_quality`` (the rest are counted)."""
+
+
+def _unmapped(table: Table, mapped) -> list[str]:
+    """The columns of ``table`` that no role maps (by name or 0-based number): ignored, listed."""
+    names = list(table.columns)
+    used = {names[c] if isinstance(c, int) and not isinstance(c, bool) and 0 <= c < len(names)
+            else str(c) for c in mapped}
+    out = [n for n in names if n not in used]
+    if len(out) > UNMAPPED_LISTED:
+        out = out[:UNMAPPED_LISTED] + [f"... and {len(out) - UNMAPPED_LISTED} more"]
+    return out
+
+
+def _frequency_hz(values, spec: MeasurementSpec):
+    """The frequency channel in Hz: its unit (Hz, mHz, pu of f_nominal) and kind (the frequency,
+    or its deviation from f_nominal)."""
+    scale = FREQUENCY_UNITS[spec.frequency_unit.lower()]
+    f = np.asarray(values, dtype=float) * (spec.f_nominal_hz if scale is None else scale)
+    return f + spec.f_nominal_hz if spec.frequency_kind == "deviation" else f
 
 
 def _check_stuck(raw, src, names):
@@ -342,12 +405,7 @@ def _parse_time(raw, spec: MeasurementSpec, src, name, first_row):
     if bad.any():
         k = int(np.flatnonzero(bad.to_numpy())[0])
         cell = str(text.iloc[k])
-        hint = ""
-        if spec.time_format is None and "/" in cell:
-            hint = ("; set measurement.time_format, e.g. \"%m/%d/%Y %H:%M:%S.%f\" (or %d/%m/%Y: "
-                    "day first)")
-        elif spec.time_format is None:
-            hint = "; set measurement.time_format (strftime codes) for other layouts"
+        hint = _time_format_hint(cell, spec.time_format)
         what = "an ISO 8601 timestamp" if spec.time_format is None else f"a timestamp in {fmt!r}"
         raise InputError(src, f"{cell!r} is neither seconds nor {what}{hint}", column=name,
                          row=k + first_row)
@@ -371,6 +429,33 @@ def _parse_time(raw, spec: MeasurementSpec, src, name, first_row):
     if zone is None and not spec.timezone:
         label += " (no time zone)"
     return seconds, label, start
+
+
+_TWELVE_HOUR = re.compile(r"\d\s*([AaPp])\.?[Mm]\.?\s*$")
+
+
+def _time_format_hint(cell: str, time_format: str | None) -> str:
+    """What to set for a timestamp ``cell`` that does not parse: a time_format that fits the
+    cell's layout (day/month order, fractions, a 12-hour clock with AM/PM), or nothing."""
+    twelve = bool(_TWELVE_HOUR.search(cell.strip()))
+    if time_format is not None:
+        if twelve and "%p" not in time_format:
+            fixed = time_format.replace("%H", "%I") + ("" if "%p" in time_format else " %p")
+            return (f"; the timestamps use a 12-hour clock (AM/PM): use %I for the hour and %p, "
+                    f"e.g. time_format = {fixed!r}")
+        return ""
+    clock = "%I:%M:%S" if twelve else "%H:%M:%S"
+    frac = ".%f" if re.search(r":\d{2}[.,]\d", cell) else ""
+    ampm = " %p" if twelve else ""
+    if "/" in cell:
+        example = f"%m/%d/%Y {clock}{frac}{ampm}"
+        return (f"; set measurement.time_format, e.g. {example!r} (or %d/%m/%Y: day first)"
+                + ("; a 12-hour clock (AM/PM) needs %I and %p, not %H" if twelve else ""))
+    if twelve:
+        date = "%Y-%m-%d " if re.match(r"\d{4}-\d{2}-\d{2}", cell) else ""
+        return (f"; the timestamps use a 12-hour clock (AM/PM): set measurement.time_format with "
+                f"%I and %p, e.g. {date + clock + frac + ampm!r}")
+    return "; set measurement.time_format (strftime codes) for other layouts"
 
 
 def _zone(name: str):
@@ -425,7 +510,8 @@ def _check_frame_rate(rate, spec: MeasurementSpec, src, name):
 
 def _phasors(raw, order, spec: MeasurementSpec, src, names):
     """Positive-sequence V and I [pu, system base, generator convention] per kept row."""
-    for key in ("voltage_unit", "current_unit", "angle_unit", "current_direction"):
+    for key in ("voltage_unit", "current_unit", "angle_unit", "current_direction", "frequency_unit",
+                "frequency_kind"):
         problem = spec_value_error(key, getattr(spec, key))
         if problem:
             raise InputError(src, problem, key=f"measurement.{key}")
@@ -494,21 +580,61 @@ def _plausibility(v, i, f, t, rows, raw, order, spec: MeasurementSpec, machine, 
                              f"measurement.current_unit ({spec.current_unit!r}: kA?), a CT ratio "
                              "(secondary amperes?) and the bases", column=iname)
         if p < MIN_POWER_PU_MACHINE:
-            raise InputError(src, f"median active power is {p:.3g} pu (the plant absorbs power): if "
-                             "the current is measured towards the plant set "
-                             "measurement.current_direction = \"into_plant\"", column=iname)
+            if spec.current_direction == "into_plant":
+                hint = ("with measurement.current_direction = \"into_plant\" already set: check "
+                        "the CT polarity (does the current flow out of the plant after all? then "
+                        "leave current_direction out) and the current angle column (the voltage's "
+                        "angle mapped twice, a 180 degree reference)")
+            else:
+                hint = ("if the current is measured towards the plant set "
+                        "measurement.current_direction = \"into_plant\"")
+            raise InputError(src, f"median active power is {p:.3g} pu (the plant absorbs power): "
+                             + hint, column=iname, row=f"{rows[0]}-{rows[-1]}")
         _check_rating(np.abs(i) * scale, s * scale, vm, t, fin, rows, spec, machine, src, iname)
         _check_voltage_base(spec, machine, src, vname)
-    f0 = spec.f_nominal_hz
     if f is not None and np.any(np.isfinite(f)):
-        fm = float(np.nanmedian(f))
-        if abs(fm - f0) > MAX_FREQUENCY_OFFSET * f0:
-            raise InputError(src, f"median frequency is {fm:.4g} Hz but machine.f_nominal_hz is "
-                             f"{f0}: check machine.f_nominal_hz, and that the channel is in Hz",
-                             column=names["frequency"])
+        _check_frequency(f, spec, src, names["frequency"])
     else:
         _check_system_rate(1.0 / np.median(np.diff(t)), spec, src, names["time"])
     _check_angles(v, t, f, raw, order, spec, src, aname, q)
+
+
+def _check_frequency(f, spec: MeasurementSpec, src, fname):
+    """The frequency channel [Hz, after its declared unit and kind] near nominal, and within a
+    fraction of a hertz of its median; the hint names the kind or unit the values look like."""
+    f0, fm = spec.f_nominal_hz, float(np.nanmedian(f))
+    declared = (f"frequency_kind = {spec.frequency_kind!r}, frequency_unit = {spec.frequency_unit!r}")
+    if abs(fm - f0) > MAX_FREQUENCY_OFFSET * f0:
+        # The declarations that put the median near nominal; of those, the one whose spread is
+        # most like a grid's (TYPICAL_FREQUENCY_SPREAD_HZ): a small median fits several units.
+        scale = FREQUENCY_UNITS[spec.frequency_unit.lower()] or f0
+        channel = (f - (f0 if spec.frequency_kind == "deviation" else 0.0)) / scale
+        fits = []
+        for k in FREQUENCY_KINDS:
+            for u in UNIT_KEYS["frequency_unit"]:
+                alt = channel * (FREQUENCY_UNITS[u.lower()] or f0) + (f0 if k == "deviation" else 0.0)
+                m = float(np.nanmedian(alt))
+                if abs(m - f0) <= MAX_FREQUENCY_OFFSET * f0:
+                    spread = max(float(np.nanmedian(np.abs(alt - m))), 1e-12)
+                    fits.append((abs(np.log(spread / TYPICAL_FREQUENCY_SPREAD_HZ)), k, u))
+        if fits:
+            _, k, u = min(fits)
+            what = {"absolute": "the frequency itself", "deviation": "a deviation from nominal"}[k]
+            hint = (f"; the values look like {what} in {u}: " + (
+                f"leave measurement.frequency_kind out (frequency_unit = \"{u}\")" if k == "absolute" else
+                f"set measurement.frequency_kind = \"deviation\" and frequency_unit = \"{u}\""))
+        else:
+            hint = "; check machine.f_nominal_hz, and measurement.frequency_unit"
+        raise InputError(src, f"median frequency is {fm:.4g} Hz ({declared}) but "
+                         f"machine.f_nominal_hz is {f0:g}{hint}", column=fname)
+    spread = float(np.nanmedian(np.abs(f - fm)))
+    if spread > MAX_FREQUENCY_SPREAD_HZ:
+        hint = (": a deviation in mHz? set measurement.frequency_unit = \"mHz\""
+                if spec.frequency_unit.lower() != "mhz" and spread * 1e-3 < MAX_FREQUENCY_SPREAD_HZ
+                else ": check measurement.frequency_unit")
+        raise InputError(src, f"the frequency strays {spread:.3g} Hz from its median {fm:.5g} Hz "
+                         f"(median absolute deviation; {declared}); grids stay within a fraction of "
+                         f"a hertz{hint}", column=fname)
 
 
 def _check_rating(i_pu, s_pu, v_pu, t, fin, rows, spec: MeasurementSpec, machine: Machine, src, iname):
@@ -554,6 +680,8 @@ def _check_rating(i_pu, s_pu, v_pu, t, fin, rows, spec: MeasurementSpec, machine
                              f"{float(np.max(i_pu[a:b + 1])):.3g}) for {t[b] - t[a]:.3g} s; IEEE C50.13 "
                              f"allows (I^2 - 1) t = {SHORT_TIME_CAPABILITY_S:g} s, this run has "
                              f"{excess[b]:.3g} s; " + fix, column=iname, row=f"{rows[a]}-{rows[b]}")
+    if spec.p_max_mw:
+        _check_p_max(s_pu.real * rating, t, fin, rows, spec, rating, src, iname)
     q_pu = float(np.median(s_pu[fin].imag))
     q_min = -LEADING_Q_MARGIN * v_pu**2 / float(machine.xd_pu)
     if q_pu > MAX_Q_LAGGING or q_pu < q_min:
@@ -566,6 +694,40 @@ def _check_rating(i_pu, s_pu, v_pu, t, fin, rows, spec: MeasurementSpec, machine
                          "the machine's capability; check the current angle reference (phase "
                          "mapping, a transformer's 30 degree shift) and " + fix.removeprefix("check "),
                          column=iname)
+
+
+def _check_p_max(p_mw, t, fin, rows, spec: MeasurementSpec, rating: float, src, iname):
+    """The measured active power against the plant's stated maximum (``spec.p_max_mw``): the
+    median over the record above it by more than ``P_MAX_TOLERANCE``, or a run above it by more
+    than ``P_MAX_RUN_TOLERANCE`` for longer than ``P_MAX_RUN_S``, is refused with the numbers and
+    the likely cause. A current logged as peak instead of RMS (x1.414) at part load stays under
+    every rating check of the machine; against what the turbine can deliver it does not."""
+    p_max = float(spec.p_max_mw)
+    source = f" ({spec.p_max_source})" if spec.p_max_source else ""
+    med = float(np.median(p_mw[fin]))
+    where, what = f"{rows[0]}-{rows[-1]}", f"median active power is {med:.4g} MW"
+    value = med
+    if med <= p_max * (1 + P_MAX_TOLERANCE):
+        above = fin & (p_mw > p_max * (1 + P_MAX_RUN_TOLERANCE))
+        starts, stops = _runs(above)
+        if not starts.size:
+            return
+        long = np.argmax(t[stops - 1] - t[starts])
+        a, b = int(starts[long]), int(stops[long]) - 1
+        if t[b] - t[a] <= P_MAX_RUN_S:
+            return
+        value = float(np.median(p_mw[a:b + 1]))
+        where = f"{rows[a]}-{rows[b]}"
+        what = f"active power stays at {value:.4g} MW (median) for {t[b] - t[a]:.3g} s"
+    cause = (f"the current logged as peak instead of RMS (x{PEAK_TO_RMS:.3f}: {value:.4g} / "
+             f"{PEAK_TO_RMS:.3f} = {value / PEAK_TO_RMS:.4g} MW)" if value / PEAK_TO_RMS <= p_max
+             else "a CT ratio")
+    raise InputError(src, f"{what} ({value / rating:.3g} pu of the {rating:g} MVA rating), "
+                     f"{100 * (value / p_max - 1):.0f} % above the plant's stated maximum of "
+                     f"{p_max:.4g} MW{source}: no turbine delivers more than its maximum; likely "
+                     f"{cause}, else the bases or the current unit: check "
+                     f"measurement.current_unit ({spec.current_unit!r}), the CT ratio and the "
+                     "plant's maximum", column=iname, row=where)
 
 
 def _check_voltage_base(spec: MeasurementSpec, machine: Machine, src, vname):

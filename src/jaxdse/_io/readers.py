@@ -67,6 +67,11 @@ class Table:
     """Names the header repeats; the repeats are named "name#2", ... and the bare name is refused."""
     notes: dict = field(default_factory=dict)
     """What the reader detected and handled (separator, BOM, decimal comma, units row, ...)."""
+    unreadable: dict = field(default_factory=dict)
+    """Column name -> (file, message, row) of its first cell that is not a number (the column
+    holds NaN there): an :class:`InputError` only when the config maps the column
+    (:meth:`column`), so that a text column nobody asked for (a PMU STAT column of words, a
+    station name) is ignored."""
 
     def column(self, name: str | int, role: str) -> np.ndarray:
         """The column ``name`` (or 0-based position), or an InputError naming ``role``."""
@@ -75,6 +80,7 @@ class Table:
             if not 0 <= name < len(names):
                 raise InputError(self.source, f"there is no column number {name} "
                                  f"(the file has {len(names)})", column=role)
+            self._readable(names[name])
             return self.columns[names[name]]
         if name in self.ambiguous:
             raise InputError(self.source, f"the header repeats {name!r}; name one of "
@@ -85,7 +91,14 @@ class Table:
                 f"; the file has {len(names)} columns, e.g. {', '.join(map(repr, names[:4]))}"
             raise InputError(self.source, f"no column named {name!r} for {role}{hint}",
                              column=name)
+        self._readable(name)
         return self.columns[name]
+
+    def _readable(self, name: str) -> None:
+        if name in self.unreadable:
+            path, message, row = self.unreadable[name]
+            raise InputError(path, message, column=name.split("/", 1)[-1] if path != self.source
+                             else name, row=row)
 
 
 def load_table(paths, fmt: str | None = None, *, csv_options: CsvOptions = CsvOptions(),
@@ -104,7 +117,7 @@ def load_table(paths, fmt: str | None = None, *, csv_options: CsvOptions = CsvOp
     tables = [_load_cached(p, _mtime(p), fmt, csv_options, time_column) for p in paths]
     if len(tables) == 1:
         return tables[0]
-    columns, units = {}, {}
+    columns, units, unreadable = {}, {}, {}
     n = len(next(iter(tables[0].columns.values())))
     for p, tab in zip(paths, tables):
         m = len(next(iter(tab.columns.values())))
@@ -114,9 +127,12 @@ def load_table(paths, fmt: str | None = None, *, csv_options: CsvOptions = CsvOp
             columns[f"{p.stem}/{name}"] = values
             if name in tab.units:
                 units[f"{p.stem}/{name}"] = tab.units[name]
+            if name in tab.unreadable:
+                unreadable[f"{p.stem}/{name}"] = tab.unreadable[name]
     ambiguous = frozenset(f"{p.stem}/{a}" for p, tab in zip(paths, tables) for a in tab.ambiguous)
     return Table(source=" + ".join(map(str, paths)), columns=columns, units=units,
-                 first_row=tables[0].first_row, ambiguous=ambiguous, notes=tables[0].notes)
+                 first_row=tables[0].first_row, ambiguous=ambiguous, notes=tables[0].notes,
+                 unreadable=unreadable)
 
 
 def _mtime(path: Path):
@@ -213,15 +229,17 @@ def _read_csv(path: Path, opt: CsvOptions, time_column) -> Table:
     if units_row:
         units = {h: u.strip() for h, u in zip(header, rows[0]) if u.strip()}
         body += 1
-    columns = _parse_body(path, body, header, sep, opt.quotechar, decimal, na, time_column, encoding)
+    columns, unreadable = _parse_body(path, body, header, sep, opt.quotechar, decimal, na, time_column,
+                                      encoding)
     empty = [h for h, raw in zip(header, _split_line(lines[k], sep, opt.quotechar))
-             if not raw.strip() and columns[h].dtype.kind == "f" and np.all(np.isnan(columns[h]))]
+             if not raw.strip() and columns[h].dtype.kind == "f" and np.all(np.isnan(columns[h]))
+             and h not in unreadable]
     if empty:
         notes["empty_columns"] = f"{len(empty)} unnamed column(s) without values ignored " \
             "(separators at the ends of the lines)"
         columns = {h: c for h, c in columns.items() if h not in empty}
     return Table(source=str(path), columns=columns, units=units, first_row=body + 1,
-                 ambiguous=ambiguous, notes=notes)
+                 ambiguous=ambiguous, notes=notes, unreadable=unreadable)
 
 
 def _split_line(line: str, sep: str, quotechar: str) -> list[str]:
@@ -275,7 +293,9 @@ def _looks_like_units(first: list[str], second: list[str], na: set, decimal: str
 
 
 def _parse_body(path, skip: int, header, sep, quotechar, decimal, na, time_column, encoding):
-    """The data lines after the first ``skip`` lines, one array per column (pandas' C reader)."""
+    """The data lines after the first ``skip`` lines, one array per column (pandas' C reader),
+    and the error of each column with a cell that is not a number (see ``Table.unreadable``).
+    Hexadecimal words (``0x8000``, C37.118 STAT as some exports write it) are read as integers."""
     import pandas as pd
 
     first_row = skip + 1
@@ -297,7 +317,7 @@ def _parse_body(path, skip: int, header, sep, quotechar, decimal, na, time_colum
             raise InputError(path, f"has {m.group(3)} fields but the header has {m.group(1)}{hint}",
                              row=int(m.group(2))) from None
         raise InputError(path, f"cannot be read as CSV ({str(err).splitlines()[0]})") from None
-    columns = {}
+    columns, unreadable = {}, {}
     for name in header:
         col = frame[name]
         if name == time_name and col.dtype.kind not in "fiu":
@@ -314,6 +334,9 @@ def _parse_body(path, skip: int, header, sep, quotechar, decimal, na, time_colum
             continue
         values = pd.to_numeric(col, errors="coerce")
         bad = values.isna() & col.notna()
+        if bad.any() and _all_hex(col[bad]):
+            values = values.where(~bad, col[bad].map(lambda c: float(int(str(c).strip(), 16))))
+            bad = values.isna() & col.notna()
         if bad.any():
             k = int(np.flatnonzero(bad.to_numpy())[0])
             cell = str(col.iloc[k])
@@ -324,10 +347,17 @@ def _parse_body(path, skip: int, header, sep, quotechar, decimal, na, time_colum
                 hint = "; a decimal comma? set measurement.decimal = \",\""
             else:
                 hint = "; add the word to measurement.na_values if it marks a missing value"
-            raise InputError(path, f"value {cell!r} is not a number{hint}", column=name,
-                             row=first_row + k)
+            unreadable[name] = (str(path), f"value {cell!r} is not a number{hint}", first_row + k)
         columns[name] = values.to_numpy(dtype=float)
-    return columns
+    return columns, unreadable
+
+
+_HEX = re.compile(r"\s*0[xX][0-9a-fA-F]+\s*")
+
+
+def _all_hex(cells) -> bool:
+    """Every cell a hexadecimal word such as ``0x8000``."""
+    return all(isinstance(c, str) and _HEX.fullmatch(c) for c in cells)
 
 
 def _dedupe(header: list[str]) -> tuple[list[str], frozenset]:

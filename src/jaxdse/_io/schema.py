@@ -37,6 +37,78 @@ TEXT_KEYS = ("delimiter", "quotechar", "time_format", "timezone")
 """Keys of [measurement] that take a non-empty string."""
 BASE_KEYS = ("v_base_kv", "s_base_mva", "frame_rate_hz")
 """Keys of [measurement] that take a number > 0."""
+PLANT_SPEC_FIELDS = {"f_nominal_hz", "csv_options", "p_max_mw", "p_max_source"}
+"""Fields of :class:`MeasurementSpec` that are not [measurement] keys (plant data, or the CSV
+keys gathered)."""
+
+TYPICAL_MACHINE = {
+    # PSS/E name: (low, high, unit, run-config key of [machine] or None, source)
+    "Xd": (0.6, 2.5, "pu", "xd_pu", "IEEE Std 1110-2002 (as issue 32 quotes it); Kundur: hydro "
+           "0.6-1.5, thermal 1.0-2.3"),
+    "Xq": (0.4, 2.5, "pu", "xq_pu", "Kundur: hydro 0.4-1.0, thermal 1.0-2.3 (upper end as Xd)"),
+    "X'd": (0.1, 0.5, "pu", "xd1_pu", "IEEE Std 1110-2002 (as issue 32 quotes it); Kundur: hydro "
+            "0.2-0.5, thermal 0.15-0.4"),
+    "X'q": (0.2, 1.0, "pu", None, "Kundur: thermal 0.3-1.0 (lower end widened to 0.2)"),
+    "X''d": (0.1, 0.45, "pu", None, "Kundur: X''d 0.12-0.35, X''q 0.12-0.45 (GENROU's X''d is also "
+             "its X''q; lower end 0.1)"),
+    "Xl": (0.05, 0.35, "pu", None, "Kundur: 0.1-0.2 (widened to 0.05-0.35)"),
+    "Ra": (0.0, 0.02, "pu", "rs_pu", "Kundur: hydro 0.002-0.02, thermal 0.0015-0.005"),
+    "T'do": (1.5, 15.0, "s", "td01_s", "IEEE Std 1110-2002 2-15 s (as issue 32 quotes it); Kundur: "
+             "hydro 1.5-9, thermal 3-10"),
+    "T'qo": (0.2, 3.0, "s", None, "Kundur: thermal 0.5-2.0 (widened to 0.2-3)"),
+    "T''qo": (0.01, 0.2, "s", None, "Kundur: hydro 0.01-0.09, thermal 0.02-0.05 (upper end 0.2)"),
+}
+"""Typical ranges of machine data on the machine base (P. Kundur, *Power System Stability and
+Control*, 1994, Table 4.2, hydro and thermal units; IEEE Std 1110-2002 for Xd, X'd and T'do, as
+issue 32 quotes it). A value outside is flagged (``data_quality``, the verdict's reasons, the
+fleet unit's notes) and used as given; a value more than ``IMPLAUSIBLE_FACTOR`` x the upper end
+is refused (a reactance in percent, a time constant in ms). Only data the estimator uses are
+checked (T''do is not: the q-axis circuits and the flux-decay d axis do without it)."""
+TYPICAL_SOURCE = "IEEE Std 1110; Kundur 1994, Table 4.2"
+"""The source named in the flag of a value outside its typical range."""
+IMPLAUSIBLE_FACTOR = 10.0
+"""A machine value above this x its typical upper end is a unit mistake, refused [-]."""
+
+
+def machine_value_findings(values: dict) -> tuple[list[str], list[str]]:
+    """Machine data (PSS/E names of :data:`TYPICAL_MACHINE` -> value on the machine base)
+    against their typical ranges: (refused, flagged), one phrase each naming the quantity, the
+    value, the range and the likely cause; the caller prefixes where the value came from."""
+    refused, flagged = [], []
+    for name, value in values.items():
+        if name not in TYPICAL_MACHINE or value is None or not math.isfinite(value):
+            continue
+        lo, hi, unit = TYPICAL_MACHINE[name][:3]
+        if lo <= value <= hi:
+            continue
+        if value > IMPLAUSIBLE_FACTOR * hi:
+            factor, word = (100.0, "percent") if unit == "pu" else (1000.0, "milliseconds")
+            fixed = value / factor
+            guess = (f"looks like {word}: {value:g} -> {fixed:.3g} {unit}?" if lo / 2 <= fixed <= 2 * hi
+                     else f"{word}, or another base?")
+            refused.append(f"{name} = {value:g} {unit} is more than {IMPLAUSIBLE_FACTOR:g} x the typical "
+                           f"upper end {hi:g} {unit}: {guess}")
+        else:
+            flagged.append(f"{name} = {value:g} {unit} is outside the typical {lo:g}-{hi:g} {unit} "
+                           f"({TYPICAL_SOURCE}): used as given")
+    return refused, flagged
+
+
+def machine_checks(path, table: dict, prefix: str) -> list[str]:
+    """[machine] of a run config against :data:`TYPICAL_MACHINE`: a value more than
+    ``IMPLAUSIBLE_FACTOR`` x the typical range is an :class:`InputError` naming the key ("looks
+    like percent: 180 -> 1.8 pu?"); the flags of values merely outside are returned, one line
+    each, naming the key."""
+    keys = {spec[3]: name for name, spec in TYPICAL_MACHINE.items() if spec[3]}
+    flags = []
+    for key, name in keys.items():
+        if key not in table:
+            continue
+        refused, flagged = machine_value_findings({name: number(path, table[key], f"{prefix}machine.{key}")})
+        if refused:
+            raise InputError(path, refused[0], key=f"{prefix}machine.{key}")
+        flags += [f"{prefix}machine.{key}: {f}" for f in flagged]
+    return flags
 
 
 def read_toml(path: Path) -> dict:
@@ -257,7 +329,7 @@ def measurement_section(path, table: dict, f_nominal_hz: float, prefix: str,
     key = prefix + "measurement."
     csv_keys = {f.name for f in dataclasses.fields(CsvOptions)}
     hints = {**field_types(MeasurementSpec), **field_types(CsvOptions)}
-    no_unknown(path, table, set(hints) - {"f_nominal_hz", "csv_options"}, key)
+    no_unknown(path, table, set(hints) - PLANT_SPEC_FIELDS, key)
     if partial:
         table = {"file": "-", "columns": {}, **table}
     if "file" not in table:
