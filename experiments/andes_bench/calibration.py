@@ -155,7 +155,7 @@ def main():
         for draw in range(args.draws if with_noise else 0):
             ev_n = jd.stack_events([noisy(s, 1000 * k + 10 * draw + e) for e, s in enumerate(series)])
             t0 = time.perf_counter()
-            rn = jd.calibrate_where_rejected(wrong, free, ev_n, fit, cal).first_fit
+            rn = jd.calibrate(wrong, free, ev_n, fit, cal)      # the joint fit whose intervals decide
             for lab, v, ci in zip(rn.labels, rn.values, rn.ci95):
                 x_true = true_x[lab]
                 cover.append({"case": case, "unit": tag, "draw": draw, "parameter": lab, "true": x_true,
