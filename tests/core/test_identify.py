@@ -168,6 +168,18 @@ def test_every_verdict_bit(assessed, reason):
         assert int(v.governor_code) == 1
 
 
+def test_a_simplified_model_is_at_best_weakly_identified(assessed):
+    """A plant whose estimator model was simplified by a fallback (q-axis circuits left out,
+    constant torque; ``Plant.h_model_error``) is at best ``weakly identified`` unless H's
+    interval (here +-5 %) covers the error the simplification can cause; inf: unknown."""
+    a = assessed
+    for error, code in ((0.0, 0), (0.04, 0), (0.2, 1), (float("inf"), 1)):
+        v = verdict(a.estimate, a.identified, a.replay, VerdictSettings(), error)
+        assert int(v.code) == code and bool(int(v.reasons) & _BIT["model_simplified"]) == (code == 1)
+    wide = _with(a, identified__relative_ci=0.8)  # worse verdicts stay as they are
+    assert int(verdict(wide.estimate, wide.identified, wide.replay, VerdictSettings(), float("inf")).code) == 2
+
+
 def test_playback_diverged_and_drem_bits(assessed):
     a = eqx.tree_at(lambda x: x.replay.smape, assessed, assessed.replay.smape._replace(i_t=jnp.asarray(80.0)))
     v = verdict(a.estimate, a.identified, a.replay)
@@ -176,7 +188,7 @@ def test_playback_diverged_and_drem_bits(assessed):
     v = verdict(far.estimate, far.identified, far.replay)
     assert int(v.reasons) & _BIT["drem_contradicts"] and int(v.reasons) & _BIT["drem_disagrees"]
     assert int(v.code) == 0  # a note: the online estimate never sets H's verdict
-    assert set(CASES) | {"drem_contradicts", "drem_disagrees"} == set(REASONS)
+    assert set(CASES) | {"drem_contradicts", "drem_disagrees", "model_simplified"} == set(REASONS)
     # an alternative the data reject (a coefficient far from 0 with confidence) is no assumption
     sure = _with(assessed, identified__h_without_governor_correction_s=100.0,
                  identified__governor_gain_error=0.2, identified__covariance=jnp.diag(jnp.array([1e-6] * 4)))

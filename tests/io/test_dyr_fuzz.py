@@ -161,13 +161,17 @@ def _const(case, k, field, value):
 
 DAMAGE = {
     # name: (edit, unit, expected: "skip", "note" or "run", text in the reason or the note)
-    "X''d below Xl": (lambda c: _const(c, 0, "X''d", "0.12"), "B2_G1", "note",
+    # odd but evaluable: used as given, with a data warning ("warn")
+    "X''d below Xl": (lambda c: _const(c, 0, "X''d", "0.12"), "B2_G1", "warn",
                       "GENROU on bus 2 id '1' (case.dyr line 1): X''d = 0.12 below Xl = 0.15: "
-                      "q-axis circuits left out (transient model)"),
-    "X''d equal to Xl": (lambda c: _const(c, 0, "X''d", "0.15"), "B2_G1", "note",
-                         "X''d = 0.15 not above Xl = 0.15"),
-    "X''d above X'q": (lambda c: _const(c, 3, "X''d", "0.9"), "B3_G1", "note",
-                       "X''d (= X''q) = 0.9 above X'q = 0.8: q-axis circuits left out"),
+                      "used as given"),
+    "X''d equal to Xl": (lambda c: _const(c, 0, "X''d", "0.15"), "B2_G1", "warn",
+                         "X''d = 0.15 equal to Xl"),
+    "X''d above X'q": (lambda c: _const(c, 3, "X''d", "0.9"), "B3_G1", "warn",
+                       "X''d (= X''q) = 0.9 above X'q = 0.8: used as given"),
+    "X'q equal to Xl": (lambda c: _const(c, 0, "X'q", "0.15"), "B2_G1", "note",
+                        "X'q = 0.15 equal to Xl: the q-axis equations divide by X'q - Xl: q-axis "
+                        "circuits left out (transient model)"),
     "T''qo zero": (lambda c: _const(c, 8, "T''qo", "0"), "B5_G2", "note", "T''qo = 0 must be > 0"),
     "H zero": (lambda c: _const(c, 0, "H", "0"), "B2_G1", "skip",
                "GENROU on bus 2 id '1' (case.dyr line 1): H = 0 must be > 0"),
@@ -236,6 +240,10 @@ def test_one_damaged_unit(tmp_path, damage):
         assert text in reason and "\n" not in reason
     elif outcome == "run":           # the frequency is optional: derived from the voltage angle
         assert plants[unit].fallbacks == () and "frequency" not in plants[unit].run.measurement.columns
+    elif outcome == "warn":          # used as given: no fallback, the q-axis circuits kept
+        assert text in " | ".join(plants[unit].data_warnings)
+        assert lines_out(plants[unit].fallbacks) == lines_out(base_plants[unit].fallbacks)
+        assert plants[unit].run.plant.machine.q_axis is not None
     else:
         assert text in " | ".join(plants[unit].fallbacks)
         if "q-axis" in text:

@@ -558,6 +558,29 @@ def test_lenient_reading_keeps_bad_records_with_their_problem(tmp_path):
     assert [r.model for r in d.unit_records(2, "1")] == ["GENCLS"]
 
 
+def test_q_axis_problems_are_what_cannot_be_evaluated(tmp_path):
+    """The q-axis circuits fall back only where their equations cannot be evaluated (a time
+    constant not > 0, X'q equal to Xl, diverging); odd orders are warnings, one line each."""
+    base = "2 'GENROU' 1 6.5 0.03 {tq1} 0.05 4.0 2.0 1.8 {xq} 0.3 {xq1} {xd2} {xl} 0.03 0.4 /"
+    ok = dict(tq1=0.9, xq=1.7, xq1=0.55, xd2=0.25, xl=0.15)
+
+    def rec(**kw):
+        return psse.read_dyr(write(tmp_path, "q.dyr", base.format(**{**ok, **kw}))).machine(2, "1")
+
+    where = "GENROU on bus 2 id '1' (q.dyr line 1): "
+    assert psse.q_axis_problems(rec()) == [] and psse.machine_warnings(rec()) == []
+    assert psse.q_axis_problems(rec(tq1=0)) == [where + "T'qo = 0 must be > 0"]
+    assert psse.q_axis_problems(rec(xq1=0.15)) == [
+        where + "X'q = 0.15 equal to Xl: the q-axis equations divide by X'q - Xl"]
+    # X''d far above X'q: the state matrix's trace turns positive
+    assert "the q-axis equations diverge" in psse.q_axis_problems(rec(xd2=5.0))[0]
+    odd = rec(xd2=0.6, xq1=0.5, xq=0.45)
+    assert psse.q_axis_problems(odd) == []
+    assert [w.split(": ")[1] for w in psse.machine_warnings(odd)] == [
+        "X''d = 0.6 not below X'd = 0.3", "X''d (= X''q) = 0.6 above X'q = 0.5", "X'q = 0.5 above Xq = 0.45"]
+    assert [w.split(": ")[1] for w in psse.machine_warnings(rec(xd2=0.15))] == ["X''d = 0.15 equal to Xl"]
+
+
 def test_lenient_raw_and_plant_data_checks(tmp_path):
     text = _rev32(RAW33).replace("  1000.000, 2.00000E-3", "  nan, 2.00000E-3")
     text = text.replace("     3,'TER BUS     ',  10.5000", "     3,'TER BUS     ',  10.5000\n     3,'AGAIN',  10.5")
@@ -573,7 +596,11 @@ def test_lenient_raw_and_plant_data_checks(tmp_path):
         2 'GENSAL' G2 5.0 0.05 0.1 -3.2 0.0 1.1 0.7 1.3 0.25 0.15 0.1 0.3 /
         """))
     rou = dyr.machine(2, "G1")
-    assert psse.q_axis_problems(rou) == ["GENROU on bus 2 id 'G1' (c.dyr line 1): X''d = 0.12 below Xl = 0.15"]
+    # X''d below Xl: odd but evaluable, so used as given with a data warning, not a problem
+    assert psse.q_axis_problems(rou) == []
+    assert psse.machine_warnings(rou) == [
+        "GENROU on bus 2 id 'G1' (c.dyr line 1): X''d = 0.12 below Xl = 0.15: used as given (PSS/E "
+        "warns about such records and simulates them)"]
     assert psse.machine_problems(rou, g) == [g.problem]
     good = psse.read_raw(write(tmp_path, "g.raw", _rev32(RAW33))).generator(2, "G1")
     assert psse.machine_problems(rou, good) == []

@@ -65,6 +65,11 @@ class FleetPlant:
     7): X''d = 0.12 below Xl = 0.15: q-axis circuits left out (transient model)", "...: no
     governor record; constant mechanical torque", "...: a second machine record for this
     machine; the first (GENROU at line 7) is used". Empty for a plant that runs on its data."""
+    data_warnings: tuple[str, ...] = ()
+    """Odd values in the plant's records that are used as given (their equations can be
+    evaluated), one line each naming the record and the values, e.g. "GENROU on bus 3 id '1'
+    (case.dyr line 7): X''d = 0.12 below Xl = 0.15 (used as given; PSS/E warns and simulates
+    it)". The fleet.json entry's ``data_warnings``; the unit page lists them."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -107,7 +112,10 @@ def load_fleet(path) -> Fleet:
                          + f"; use `jaxdse run {path}`, or add [case]", key="case")
     no_unknown(path, data, TOP, "")
     case = subtable(path, data, "case", "case")
-    no_unknown(path, case, {"raw", "dyr"}, "case.")
+    no_unknown(path, case, {"raw", "dyr", "q_axis_circuits"}, "case.")
+    # false: the estimator leaves every GENROU/GENTPJ's q-axis circuits out (the transient model),
+    # as it once did for records it could not order; for comparison (the verdict says so)
+    q_axis = typed_value(path, bool, case.get("q_axis_circuits", True), "case.q_axis_circuits")
     files = {}
     for k in ("raw", "dyr"):
         value = case.get(k)
@@ -142,7 +150,7 @@ def load_fleet(path) -> Fleet:
                                         dyr, list(table.columns))
     candidates = []
     for name, bus, ids, columns, direction in found:
-        units = plant_units(raw, dyr, bus, ids)
+        units = plant_units(raw, dyr, bus, ids, q_axis_circuits=q_axis)
         why = units.skip_reason()
         if why is None:
             try:
@@ -164,7 +172,8 @@ def load_fleet(path) -> Fleet:
             skipped.append(_skip(name, bus, f"plant data: {e}"))
             continue
         built.append(FleetPlant(name, bus, tuple(units.members), tuple(units.others), run,
-                                fallbacks=tuple(_one_line(n) for n in (*units.notes, *notes))))
+                                fallbacks=tuple(_one_line(n) for n in (*units.notes, *notes)),
+                                data_warnings=tuple(_one_line(n) for n in units.data_warnings)))
     if not built:
         if skipped:
             first = skipped[0]

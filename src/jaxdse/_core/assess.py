@@ -56,4 +56,4 @@ def assess(recording: Recording, plant: Plant, config: ObserverConfig = Observer
     ident = identify_front(recording, fe, t_ref, plant, config, settings, identify_settings, draws)
     rep = replay_front(ts, fe, t_ref, ident.t_m0_pu, plant, ident.a1, ident.a2, settings,
                        ident.t_m_offset_pu, ident.governor_gain_error)
-    return Assessment(online, ident, rep, verdict(online, ident, rep, verdict_settings))
+    return Assessment(online, ident, rep, verdict(online, ident, rep, verdict_settings, plant.h_model_error))

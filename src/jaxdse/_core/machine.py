@@ -58,11 +58,13 @@ class QAxisCircuits(eqx.Module):
     def __check_init__(self):
         check_positive(self, "xq1_pu", "xq2_pu", "tq01_s", "tq02_s")
         check_nonnegative(self, "xl_pu")
-        if concrete(self.xq2_pu) and concrete(self.xl_pu) and concrete(self.xq1_pu) and not bool(
-                np.all((np.asarray(self.xl_pu) < np.asarray(self.xq2_pu))
-                       & (np.asarray(self.xq2_pu) <= np.asarray(self.xq1_pu)))):
-            raise ValueError(f"QAxisCircuits must have xl_pu < xq2_pu <= xq1_pu, got {self.xl_pu}, "
-                             f"{self.xq2_pu}, {self.xq1_pu}")
+        # Used as given wherever the equations can be evaluated: they divide by X'q - Xl only.
+        # X''q below Xl (shipped cases have it; PSS/E warns and simulates it) or above X'q is
+        # odd data, not a reason to drop the circuits (``jaxdse._io.psse.machine_warnings``).
+        if concrete(self.xl_pu) and concrete(self.xq1_pu) and not bool(
+                np.all(np.asarray(self.xl_pu) != np.asarray(self.xq1_pu))):
+            raise ValueError(f"QAxisCircuits must have xq1_pu other than xl_pu (the equations divide "
+                             f"by X'q - Xl), got {self.xl_pu}, {self.xq1_pu}")
 
     def state_space(self, xq):
         """(A, B, c): d[E'd, psi'q]/dt = A x + B Iq and E''d = c . x (PSS/E GENROU, unsaturated)."""

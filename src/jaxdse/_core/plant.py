@@ -19,7 +19,7 @@ import equinox as eqx
 from jaxtyping import Array, Float
 
 from .._models.governors import TGOV1, AbstractGovernor
-from .fields import as_float, check_positive
+from .fields import as_float, check_nonnegative, check_positive
 from .machine import Machine
 from .mapping import AuxiliarySystem, Line, Transformer
 
@@ -37,9 +37,16 @@ class Plant(eqx.Module):
     governor: AbstractGovernor = TGOV1()
     s_base_mva: Float[Array, ""] = eqx.field(converter=as_float, default=100.0)
     """System base [MVA] of the network parameters and of the PMU phasors."""
+    h_model_error: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Relative error of H [-] that a simplification of this estimator model can cause: a
+    fallback taken for the plant's data (q-axis circuits left out, constant mechanical torque
+    for a governor record that is missing or not modelled); ``inf`` where its size is not
+    known, 0 for a plant modelled from its data. H's verdict is at best ``weakly identified``
+    unless H's 95 % interval covers it (:mod:`jaxdse._core.verdict`, ``model_simplified``)."""
 
     def __check_init__(self):
         check_positive(self, "s_base_mva")
+        check_nonnegative(self, "h_model_error")
 
     @property
     def current_scale(self):

@@ -9,8 +9,10 @@ governor correction get their own verdicts, with the model-structure findings in
 3rd-order model lumps the excitation and stabiliser damping into D; a governor response far
 from the .dyr model's). The unit's headline is H's verdict, because H is what the fleet report
 files. A unit is never ``identified`` when H's interval is wider than ``identified_ci``
-(+-10 %), when H <= 0, when H rests on an assumption the data cannot rule out, or when its
-playback diverges. A negative D is D's finding (the 3rd-order model lumps the excitation and
+(+-10 %), when H <= 0, when H rests on an assumption the data cannot rule out, when its
+estimator model was simplified by a fallback for its data and H's interval does not cover the
+error that can cause (``Plant.h_model_error``), or when its playback diverges. A negative D
+is D's finding (the 3rd-order model lumps the excitation and
 stabiliser damping into it), not H's.
 
 The verdicts are computed in JAX (integers and a bit set of reasons, so that they vmap over a
@@ -49,6 +51,10 @@ REASONS = {
                          "too large (a current logged as peak instead of RMS, a CT ratio)",
     "drem_contradicts": "the online (DREM) estimate converged more than the identified limit away from "
                         "the batch H",
+    "model_simplified": "the estimator's model was simplified by a fallback for the plant's data (q-axis "
+                        "circuits left out, or constant mechanical torque for a missing or unmodelled "
+                        "governor; see the unit's fallbacks), and H's 95 % interval does not cover the "
+                        "error that can cause",
     # D and the governor correction (their own verdicts; model-structure findings in words)
     "negative_damping": "D < 0 with 95 % confidence: the 3rd-order model lumps the excitation and "
                         "stabiliser damping into D",
@@ -62,7 +68,8 @@ REASONS = {
 _BIT = {name: 1 << k for k, name in enumerate(REASONS)}
 _FAILED = ("offline", "solver", "not_finite", "h_not_positive", "playback_diverged")
 _NOT_IDENTIFIED = ("interval_very_wide",)
-_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor", "power_above_droop")
+_WEAK = ("interval_wide", "h_rests_on_damping", "h_rests_on_governor", "model_simplified",
+         "power_above_droop")
 FINDINGS = ("negative_damping", "d_interval_wide", "governor_model_off")
 """Reasons about D and the governor correction that set those parameters' verdicts, not H's.
 A negative D reaches H's verdict through ``h_rests_on_damping`` and through the filter spread
@@ -110,8 +117,10 @@ class Verdict(eqx.Module):
 
 
 def verdict(est: Estimate, ident: Identified, rep: Replay,
-            settings: VerdictSettings = VerdictSettings()) -> Verdict:
-    """The verdicts of one unit from its online estimate, its identification and its replay."""
+            settings: VerdictSettings = VerdictSettings(), h_model_error=0.0) -> Verdict:
+    """The verdicts of one unit from its online estimate, its identification and its replay;
+    ``h_model_error``: the relative error of H that a simplified estimator model can cause
+    (``Plant.h_model_error``; inf: unknown), which H's interval must cover for ``identified``."""
     lo, hi = ident.h_ci95[0], ident.h_ci95[1]
     drem_h = est.h_s
 
@@ -134,6 +143,7 @@ def verdict(est: Estimate, ident: Identified, rep: Replay,
         "power_above_droop": (ident.governor_gain_error > settings.max_governor_excess)
                              & ~plausible_zero(ident, 3),
         "drem_contradicts": est.converged & ~(jnp.abs(drem_h / ident.h_s - 1.0) <= settings.identified_ci),
+        "model_simplified": (h_model_error > 0) & ~(ident.relative_ci >= h_model_error),
         "negative_damping": d_hi < 0,
         "d_interval_wide": ~(0.5 * (d_hi - d_lo) <= jnp.abs(ident.d_pu_s)),
         "governor_model_off": ~(jnp.abs(ident.governor_gain_error) <= settings.max_governor_gain_error),

@@ -29,6 +29,7 @@ from .psse_convert import (
     load_unit,
     machine_kwargs,
     machine_problems,
+    machine_warnings,
     q_axis_problems,
     record_label,
     transformer_kwargs,
@@ -66,6 +67,7 @@ __all__ = [
     "TYPED_MODELS", "DyrData", "DyrRecord", "MachineTransientData", "RawBranch", "RawBus",
     "RawCase", "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer",
     "generator_label", "governor_from_dyr", "load_unit", "machine_kwargs", "machine_problems",
+    "machine_warnings",
     "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "read_raw", "record_label",
     "transformer_kwargs", "transformer_sides", "transient_data",
 ]

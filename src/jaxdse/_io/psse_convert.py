@@ -119,7 +119,8 @@ def machine_problems(record: DyrRecord, generator: RawGenerator) -> list[str]:
 
     Checked: the records read (``problem``); finite values; H, T'do, Xd, Xq, X'd > 0 (GENCLS:
     H > 0 and the ZSORCE reactance ZX > 0); D >= 0; X'd <= Xd; MBASE > 0; ZR >= 0. The q-axis
-    circuits are checked apart (:func:`q_axis_problems`): jaxdse can do without them.
+    circuits are checked apart (:func:`q_axis_problems`): jaxdse can do without them; odd
+    values that can still be evaluated are :func:`machine_warnings`.
     """
     out = []
     g = generator
@@ -153,32 +154,67 @@ def machine_problems(record: DyrRecord, generator: RawGenerator) -> list[str]:
 
 
 def q_axis_problems(record: DyrRecord) -> list[str]:
-    """Why the q-axis circuits of a GENROU/GENTPJ record cannot be used by
-    :class:`jaxdse.QAxisCircuits` (X''q = X''d must lie in (Xl, X'q], X'q <= Xq, Xl >= 0, T'qo
-    and T''qo > 0, all finite): one line each, naming the record and the values; empty when usable
-    (and for models without these circuits)."""
+    """Why the q-axis circuits of a GENROU/GENTPJ record cannot be evaluated by
+    :class:`jaxdse.QAxisCircuits`: a value not finite, T'qo, T''qo, X'q or X''d not > 0, Xl < 0,
+    X'q equal to Xl (the equations divide by X'q - Xl), or equations that diverge with these
+    values and Xq (the trace of their state matrix not negative; its determinant is always
+    positive): one line each, naming the record and the values; empty when usable (and for
+    models without these circuits). Odd but usable values (X''d below Xl, above X'q, X'q above
+    Xq) are no problem: :func:`machine_warnings` lists them and the circuits are used as given.
+    """
     if record.model not in ("GENROU", "GENTPJ") or record.problem:
         return []
     p, where, out = record.params, record_label(record), []
-    names = ("X'q", "X''d", "Xl", "T'qo", "T''qo")
+    names = ("X'q", "X''d", "Xl", "Xq", "T'qo", "T''qo")
     bad = [n for n in names if not math.isfinite(p[n])]
     if bad:
         return [f"{where}: {', '.join(f'{n} = {_g(p[n])}' for n in bad)} not finite"]
-    for name in ("T'qo", "T''qo", "X'q"):
+    for name in ("T'qo", "T''qo", "X'q", "X''d"):
         if not p[name] > 0:
             out.append(f"{where}: {name} = {_g(p[name])} must be > 0")
-    if p["Xl"] < 0:
-        out.append(f"{where}: Xl = {_g(p['Xl'])} must be >= 0")
-    xd2, xq1, xl = p["X''d"], p["X'q"], p["Xl"]
-    if xd2 < xl:
-        out.append(f"{where}: X''d = {_g(xd2)} below Xl = {_g(xl)}")
-    elif xd2 == xl:
-        out.append(f"{where}: X''d = {_g(xd2)} not above Xl = {_g(xl)}")
-    if xd2 > xq1 > 0:
-        out.append(f"{where}: X''d (= X''q) = {_g(xd2)} above X'q = {_g(xq1)}")
-    if xq1 > p["Xq"] > 0:
-        out.append(f"{where}: X'q = {_g(xq1)} above Xq = {_g(p['Xq'])}")
+    xd2, xq1, xl, xq, t1, t2 = p["X''d"], p["X'q"], p["Xl"], p["Xq"], p["T'qo"], p["T''qo"]
+    if xl < 0:
+        out.append(f"{where}: Xl = {_g(xl)} must be >= 0")
+    if xq1 == xl:
+        out.append(f"{where}: X'q = {_g(xq1)} equal to Xl: the q-axis equations divide by X'q - Xl")
+    elif not out and (1.0 + (xq - xq1) * (xq1 - xd2) / (xq1 - xl) ** 2) / t1 + 1.0 / t2 <= 0:
+        out.append(f"{where}: the q-axis equations diverge with X'q = {_g(xq1)}, X''d = {_g(xd2)}, "
+                   f"Xl = {_g(xl)}, Xq = {_g(xq)}, T'qo = {_g(t1)}, T''qo = {_g(t2)}")
     return out
+
+
+def machine_warnings(record: DyrRecord) -> list[str]:
+    """Odd values of a GENROU/GENTPJ/GENSAL record that jaxdse uses as given, because its
+    equations can be evaluated (PSS/E warns about such records and simulates them): X''d below
+    or equal to Xl, X''d not below X'd, X''d (= X''q) above X'q, X'q above Xq (round rotor),
+    X''d not below Xq (GENSAL). One line each, naming the record and the values; empty for a
+    record in the usual order Xl < X''d < X'd, X''d <= X'q <= Xq, and for a record with a
+    problem or a value not finite (those are :func:`machine_problems`)."""
+    if record.model not in ("GENROU", "GENTPJ", "GENSAL") or record.problem:
+        return []
+    p, where = record.params, record_label(record)
+    round_rotor = record.model != "GENSAL"
+    names = ("X''d", "Xl", "X'd", "Xq") + (("X'q",) if round_rotor else ())
+    if not all(math.isfinite(p[n]) for n in names):
+        return []
+    xd2, xl, xd1, xq = p["X''d"], p["Xl"], p["X'd"], p["Xq"]
+    odd = []
+    if xd2 < xl:
+        odd.append(f"X''d = {_g(xd2)} below Xl = {_g(xl)}")
+    elif xd2 == xl:
+        odd.append(f"X''d = {_g(xd2)} equal to Xl")
+    if xd2 >= xd1:
+        odd.append(f"X''d = {_g(xd2)} not below X'd = {_g(xd1)}")
+    if round_rotor:
+        xq1 = p["X'q"]
+        if xd2 > xq1:
+            odd.append(f"X''d (= X''q) = {_g(xd2)} above X'q = {_g(xq1)}")
+        if xq1 > xq:
+            odd.append(f"X'q = {_g(xq1)} above Xq = {_g(xq)}")
+    elif xd2 >= xq:
+        odd.append(f"X''d = {_g(xd2)} not below Xq = {_g(xq)}")
+    return [f"{where}: {o}: used as given (PSS/E warns about such records and simulates them)"
+            for o in odd]
 
 
 def transformer_sides(raw_transformer: RawTransformer, raw_case: RawCase) -> tuple[int, int]:
@@ -335,6 +371,7 @@ def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
 
 __all__ = [
     "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "MachineTransientData", "generator_label",
-    "governor_from_dyr", "load_unit", "machine_kwargs", "machine_problems", "q_axis_problems",
+    "governor_from_dyr", "load_unit", "machine_kwargs", "machine_problems", "machine_warnings",
+    "q_axis_problems",
     "record_label", "transformer_kwargs", "transformer_sides", "transient_data",
 ]
