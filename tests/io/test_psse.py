@@ -2,6 +2,7 @@
 # ruff: noqa: E501  (the hand-made .raw samples keep PSS/E's long records)
 
 import cmath
+import dataclasses
 import math
 import re
 import textwrap
@@ -469,6 +470,8 @@ def test_machine_kwargs_and_damping_convention(tmp_path):
         2 'GENCLS' 2 3.0 1.0 /
         2 'GENSAL' 3 5.0 0.05 0.1 3.2 0.0 1.1 0.7 0.3 0.25 0.15 0.1 0.3 /
         2 'GENTPJ' 4 6.5 0.03 0.9 0.05 4.0 0.0 1.8 1.7 0.3 0.55 0.25 0.15 0.03 0.4 /
+        2 'GENSAE' 5 5.0 0.05 0.1 3.2 0.0 1.1 0.7 0.3 0.25 0.15 0.1 0.3 /
+        2 'GENROE' 6 6.5 0.03 0.9 0.05 4.0 2.0 1.8 1.7 0.3 0.55 0.25 0.15 0.03 0.4 /
         """))
     gen = psse.RawGenerator(bus=2, id="1", pg_mw=100, qg_mvar=0, qt_mvar=99, qb_mvar=-99, vs_pu=1,
                             ireg=0, mbase_mva=200.0, zr_pu=0.003, zx_pu=0.25, rt_pu=0, xt_pu=0,
@@ -493,6 +496,10 @@ def test_machine_kwargs_and_damping_convention(tmp_path):
     jd.Machine(**kw)
     sal = psse.transient_data(dyr.machine(2, "3"))
     assert sal.xq1_pu is None and sal.tq01_s is None and sal.xd2_pu == 0.25 and sal.tq02_s == 0.1
+    # the exponential-saturation variants read as their quadratic twins
+    assert psse.transient_data(dyr.machine(2, "5")) == dataclasses.replace(sal, model="GENSAE")
+    roe = psse.transient_data(dyr.machine(2, "6"))
+    assert roe.xq1_pu == tr.xq1_pu and roe.tq01_s == tr.tq01_s and not psse.q_axis_problems(dyr.machine(2, "6"))
     tpj = dyr.machine(2, "4")
     assert tpj["Kis"] == 0.0                          # GENTPJ: Kis may be omitted
     jd.Machine(**psse.machine_kwargs(tpj, gen, 21.0, 60.0))

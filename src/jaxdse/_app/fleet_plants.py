@@ -38,6 +38,7 @@ from .._io.config import GeneratorRun, governor_max_pu
 from .._io.errors import InputError
 from .._io.psse import (
     PSSE_GOVERNOR_MODELS,
+    ROUND_ROTOR,
     DyrData,
     DyrRecord,
     RawCase,
@@ -190,7 +191,7 @@ def _check_unit(raw: RawCase, dyr: DyrData, g: RawGenerator, out: PlantUnits,
         out.problems.extend(problems)
         return
     out.data_warnings.extend(machine_warnings(rec))  # odd but usable: used as given
-    q_axis = rec.model in ("GENROU", "GENTPJ")
+    q_axis = rec.model in ROUND_ROTOR
     if q_axis and (why := q_axis_problems(rec)):
         q_axis = False
         notes.append("; ".join(why) + ": q-axis circuits left out (transient model)")
@@ -275,7 +276,7 @@ def generator_run(name, bus, units: list[UnitData], spec, raw: RawCase,
     # model here bounds (3-37 % on the IEEE 39-bus case, issue 32): unknown, so H's verdict is at
     # best weakly identified (Plant.h_model_error, the verdict's ``model_simplified``).
     simplified = (any(u.governor is None for u in units)
-                  or (q_axis is None and any(u.machine.model in ("GENROU", "GENTPJ") for u in units)))
+                  or (q_axis is None and any(u.machine.model in ROUND_ROTOR for u in units)))
     plant = Plant(machine=machine, governor=governor, s_base_mva=spec.s_base_mva,
                   h_model_error=float("inf") if simplified else 0.0)
     spec = dataclasses.replace(spec, **_p_max(units, governor, s))

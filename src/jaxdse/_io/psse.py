@@ -23,6 +23,8 @@ from .psse_convert import (
     BIG_SHUNT_PU,
     DEFAULT_TAP_STEP,
     GENCLS_TD0_S,
+    ROUND_ROTOR,
+    SALIENT_POLE,
     MachineTransientData,
     generator_label,
     governor_from_dyr,
@@ -63,6 +65,7 @@ from .psse_raw import (
 
 __all__ = [
     "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "GOVERNOR_FIELDS", "GOVERNOR_PARAMETERS",
+    "ROUND_ROTOR", "SALIENT_POLE",
     "MACHINE_FIELDS", "OPTIONAL_TRAILING", "PSSE_GOVERNOR_MODELS", "SUPPORTED_RAW_REVISIONS",
     "TYPED_MODELS", "DyrData", "DyrRecord", "MachineTransientData", "RawBranch", "RawBus",
     "RawCase", "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer",

@@ -45,6 +45,12 @@ class MachineTransientData:
     """Xl, stator leakage."""
 
 
+ROUND_ROTOR = ("GENROU", "GENROE", "GENTPJ")
+"""Round-rotor machine models: q-axis transient and subtransient circuits (X''q = X''d)."""
+SALIENT_POLE = ("GENSAL", "GENSAE")
+"""Salient-pole machine models: no q-axis transient circuit."""
+
+
 def machine_kwargs(gen_dyr_record: DyrRecord, raw_generator: RawGenerator, bus_kv: float,
                    f_nominal_hz: float) -> dict:
     """Keyword arguments of :class:`jaxdse.Machine` from a machine record and its generator.
@@ -83,14 +89,15 @@ def machine_kwargs(gen_dyr_record: DyrRecord, raw_generator: RawGenerator, bus_k
 
 
 def transient_data(gen_dyr_record: DyrRecord) -> MachineTransientData | None:
-    """The GENROU/GENTPJ/GENSAL transient q-axis and subtransient data (None for GENCLS)."""
+    """The transient q-axis and subtransient data of a round-rotor (GENROU, GENROE, GENTPJ) or
+    salient-pole (GENSAL, GENSAE) record (None for GENCLS)."""
     rec = gen_dyr_record
     if rec.model == "GENCLS":
         return None
     if rec.kind != "machine":
         raise rec.error("is not a machine model")
     p = rec.params
-    salient = rec.model == "GENSAL"
+    salient = rec.model in SALIENT_POLE
     return MachineTransientData(model=rec.model, xq1_pu=None if salient else p["X'q"],
                                 tq01_s=None if salient else p["T'qo"], xd2_pu=p["X''d"],
                                 td02_s=p["T''do"], tq02_s=p["T''qo"], xl_pu=p["Xl"])
@@ -162,7 +169,7 @@ def q_axis_problems(record: DyrRecord) -> list[str]:
     models without these circuits). Odd but usable values (X''d below Xl, above X'q, X'q above
     Xq) are no problem: :func:`machine_warnings` lists them and the circuits are used as given.
     """
-    if record.model not in ("GENROU", "GENTPJ") or record.problem:
+    if record.model not in ROUND_ROTOR or record.problem:
         return []
     p, where, out = record.params, record_label(record), []
     names = ("X'q", "X''d", "Xl", "Xq", "T'qo", "T''qo")
@@ -190,7 +197,7 @@ def machine_warnings(record: DyrRecord) -> list[str]:
     X''d not below Xq (GENSAL). One line each, naming the record and the values; empty for a
     record in the usual order Xl < X''d < X'd, X''d <= X'q <= Xq, and for a record with a
     problem or a value not finite (those are :func:`machine_problems`)."""
-    if record.model not in ("GENROU", "GENTPJ", "GENSAL") or record.problem:
+    if record.model not in ROUND_ROTOR + SALIENT_POLE or record.problem:
         return []
     p, where = record.params, record_label(record)
     round_rotor = record.model != "GENSAL"
@@ -370,7 +377,8 @@ def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
     return kw, transient_data(rec), gov, (transformer_kwargs(gsu, raw) if gsu is not None else None)
 
 __all__ = [
-    "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "MachineTransientData", "generator_label",
+    "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "ROUND_ROTOR", "SALIENT_POLE",
+    "MachineTransientData", "generator_label",
     "governor_from_dyr", "load_unit", "machine_kwargs", "machine_problems", "machine_warnings",
     "q_axis_problems",
     "record_label", "transformer_kwargs", "transformer_sides", "transient_data",
