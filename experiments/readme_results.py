@@ -45,12 +45,33 @@ def block() -> str:
         out.append(
             f"- **.dyr playback against ANDES** (`experiments/andes_bench/playback.md`, `python "
             f"experiments/andes_bench/playback.py`): {s['played_back']} machine-recordings (ieee14, npcc, "
-            f"wecc; line trip, load step, gen trip), each unit's own records with ANDES's terminal voltage "
+            f"wecc and two npcc cases derived by generate.py, npcc_exdc2 and npcc_xd2_below_xl; line "
+            f"trip, load step, gen trip), each unit's own records with ANDES's terminal voltage "
             f"imposed: median RMS error P {s['median_rms_P_percent_mbase']:.4f} %, Q "
             f"{s['median_rms_Q_percent_mbase']:.4f} % of MBASE, largest P {s['max_rms_P_percent_mbase']:.3f} %, "
             f"Q {s['max_rms_Q_percent_mbase']:.3f} %; event-window peak error within 10 % of the measured "
             f"peak deviation for {s['event_peak_within_10_percent']}; rotor angle within 0.5 deg for "
             f"{s['angle_within_0.5_deg']}.")
+    rag = load("experiments/andes_bench/records_as_given.json")
+    if rag:
+        e2, nsf = rag["exdc2"]["npcc_exdc2"], rag["exdc2"]["without_speed_factor"]
+        given, off = (rag["summary"][k] for k in ("X''d below Xl, records as given",
+                                                  "X''d below Xl, q-axis circuits forced off"))
+        clean = rag["summary"]["clean npcc (records in order)"]
+        out.append(
+            f"- **Records used as given** (`experiments/andes_bench/records_as_given.md`, `python "
+            f"experiments/andes_bench/records_as_given.py`): npcc re-simulated with X''d = Xl/2 on every "
+            f"GENROU, {given['machine_recordings']} machine-recordings: median |H error| "
+            f"{given['median_abs_H_error_percent']:.2f} % (largest {given['max_abs_H_error_percent']:.2f} %) "
+            f"against {clean['median_abs_H_error_percent']:.2f} % ({clean['max_abs_H_error_percent']:.2f} %) "
+            f"on the clean case, {given['played_back_with_own_records']} played back with their own records; "
+            f"with the q-axis circuits forced off, median {off['median_abs_H_error_percent']:.2f} % (largest "
+            f"{off['max_abs_H_error_percent']:.2f} %), `identified` {off['verdicts']['identified']}, "
+            f"`identified` more than 10 % off {off['identified_more_than_10_percent_off']}. EXDC2 (npcc's "
+            f"exciters swapped): RMS error P median {e2['median_rms_P_percent_mbase']:.4f} %, Q "
+            f"{e2['median_rms_Q_percent_mbase']:.4f} % (largest {e2['max_rms_Q_percent_mbase']:.3f} %, "
+            f"ANDES's speed factor on EFD); against ANDES's IEEEX1 (its EXDC2 without that factor) Q median "
+            f"{nsf['median_rms_Q_percent_mbase']:.4f} %, largest {nsf['max_rms_Q_percent_mbase']:.3f} %.")
     cal = load("experiments/andes_bench/calibration.json")
     if cal:
         s = cal["summary"]
