@@ -166,7 +166,10 @@ governor is the MBASE-weighted sum of the units' own TGOV1, IEEEG1, GAST, HYGOV 
 (units without one hold their torque). Models the .dyr has beyond these are listed, not fatal.
 
 FLEET.toml (paths relative to it):
-  [case]         raw = "case.raw" (PSS/E rev 32/33), dyr = "case.dyr"
+  [case]         raw = "case.raw" (PSS/E rev 32/33), dyr = "case.dyr"; q_axis_circuits = false
+                 leaves every GENROU/GENTPJ's q-axis circuits out of the estimator, for comparison
+                 (records are used as given where their equations can be evaluated; odd values
+                 are listed as data warnings on the unit's page)
   [measurement]  as in `jaxdse run`: file (one file, or a list of files sharing one time
                  axis: columns are then "<file stem>/<column>"), format, units, s_base_mva,
                  location = "terminal" | "hv" (HV side of the step-up transformer in the .raw)
