@@ -71,6 +71,8 @@ def test_fleet_json_and_report(ieee14):
         assert val["result"] in ("pass", "fail") and (val["result"] == "pass") == (not val["reasons"])
         assert all(v is not None and v >= 0 for v in u["playback_rms_percent_mbase"].values())
         assert set(u["parameters"]) == {"H", "D", "governor_correction"}
+        # plant data outside the typical range (ieee14's X'd = 0.6), used as given and said so
+        assert any("X'd = 0.6 pu is outside the typical" in w for w in u["data_warnings"])
         assert u["parameters"]["H"]["verdict"] == u["verdict"]
     # No false green: B1_G1 comes out 14 % high with D < 0 (the 3rd-order model against GENROU
     # through a line trip); its filter spread keeps it from `identified`.

@@ -167,7 +167,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "governor_models": sorted({u.governor or "none (constant torque)" for u in p.members}),
         "other_units_on_bus": list(p.others),
         "fallbacks": list(p.fallbacks),
-        "data_warnings": list(p.data_warnings),
+        "data_warnings": [*p.data_warnings, *p.run.notes],   # records and plant data used as given
         "machine": module_values(m),
         "columns": dict(p.run.measurement.columns),
         "current_direction": p.run.measurement.current_direction,
