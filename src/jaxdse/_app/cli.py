@@ -1,5 +1,5 @@
 """Command-line interface: ``jaxdse run CONFIG.toml``, ``sweep``, ``tune``, ``fleet FLEET.toml``,
-``validate CONFIG.toml``
+``validate CONFIG.toml``, ``pmu-sim RECORDING.toml``
 and ``demo``.
 
 User mistakes end in a one-line error on stderr and exit status 2, never a traceback.
@@ -265,6 +265,55 @@ example:
 """
 
 
+PMU_SIM_HELP = """\
+Serve a recording as a live IEEE C37.118.2-2011 PMU stream, to test a monitor or a PDC on
+this machine. Every [[generator]] of a run configuration, or every plant of a fleet file (its
+[case], [measurement] and [channels]), is one PMU station of one concentrator stream, read and
+conditioned as `jaxdse run` and `jaxdse fleet` read it (units, gaps, screening). Each station
+sends V1 and I1 (positive-sequence voltage, and current out of the plant: V phase to neutral
+and A where the measurement gives v_base_kv, else per unit), FREQ (measured, or derived from
+the voltage angle) and DFREQ; the header frame says which.
+
+Time stamps lie on the recording's reporting grid (its frame rate and sub-second phase): from
+the next whole second (--start now), at the recording's own time (--start recording: its
+timestamps, or its time column read as seconds since 1970), or from a given time (ISO 8601 or
+seconds since 1970). Frames leave as their time comes; --speed X sends X times faster, the time
+stamps unchanged. The recording starts when the first client turns data on (--free-run: at
+once) and its end ends the stream (--loop repeats it, the grid going on). Parts of the
+recording between long gaps keep their gap.
+
+A client uses the standard's command frames (TCP; --udp for UDP both ways): send CFG-2 (or
+CFG-1, CFG-3, the header), turn data on, turn data off; frames it does not understand, or for
+another IDCODE, are ignored. The simulator listens on 127.0.0.1 only unless --host says
+otherwise, serves at most 16 clients, and drops (and counts) the frames of a client that does
+not keep up.
+
+Faults (--fault, repeatable): KIND[=VALUE]@START[+DURATION][:STATION], START and DURATION in
+seconds of stream time from the first frame; without +DURATION, the one frame at START;
+without :STATION, every station.
+  error, pmu-error, test, absent      STAT data error 11, 01, 10 (absent: also NaN or 0x8000)
+  sync, sorting, trigger[=REASON]     STAT bit 13, 12, 11 (and its trigger reason, 0-15)
+  config-bit, modified                STAT bit 10, 9
+  time-quality[=0-7], unlocked[=0-3]  STAT bits 8-6, 5-4 (default 7 and 3)
+  clock[=0-15]                        message time quality in FRACSEC (default 15, clock failure)
+  drop                                frames not sent
+  late=SECONDS                        frames sent SECONDS late (out of order)
+  crc                                 frames with a wrong CRC
+  config-change[=LEAD]                STAT bit 10 for LEAD s (default 60), then a new
+                                      configuration (phasors float <-> integer, CFGCNT + 1)
+  disconnect                          every client's connection closed
+
+On start it prints "pmu-sim listening on tcp HOST:PORT (...)" (with --port 0, the port the
+system chose). Exit status: 0 at the recording's end, after --duration or on Ctrl-C; 2 on bad
+input (the recording, a fault, the format) with a one-line message.
+
+examples:
+  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712
+  jaxdse pmu-sim examples/csv_positive_sequence.toml --port 0 --speed 10 --loop --duration 60 \\
+      --format int,rect --fault drop@30+2 --fault error@40+5 --fault config-change=5@60
+"""
+
+
 STRICT_HELP = "exit with status 3 when any unit's verdict is not 'identified'"
 
 
@@ -315,6 +364,12 @@ def _run(args) -> int:
     return _strict(args, summary["recordings"])
 
 
+def _pmu_sim(args) -> int:
+    from .._stream.pmu_sim import main as pmu_sim
+
+    return pmu_sim(args)
+
+
 def _demo(args) -> int:
     from .demo import run_demo
 
@@ -359,6 +414,31 @@ def build_parser() -> argparse.ArgumentParser:
     va.add_argument("config", metavar="CONFIG.toml", help="fleet file with [calibrate]")
     va.add_argument("--out", metavar="DIR", required=True, help="output folder")
     va.set_defaults(func=_validate)
+    ps = sub.add_parser("pmu-sim", help="serve a recording as a live C37.118 PMU stream (loopback)",
+                        description=PMU_SIM_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ps.add_argument("recording", metavar="RECORDING-or-FLEET.toml",
+                    help="a run configuration (see examples/) or a fleet file")
+    ps.add_argument("--port", type=int, default=4712, help="port (default: %(default)s; 0: any free)")
+    ps.add_argument("--host", default="127.0.0.1", help="address to listen on (default: %(default)s)")
+    ps.add_argument("--udp", action="store_true", help="UDP instead of TCP (commands and data)")
+    ps.add_argument("--idcode", type=int, default=1, help="the stream's IDCODE (default: %(default)s)")
+    ps.add_argument("--format", default="float", metavar="WORDS",
+                    help="FORMAT: float (default), int, or words such as rect,phasor=int,freq=int")
+    ps.add_argument("--speed", type=float, default=1.0, metavar="X",
+                    help="X times faster than real time (default: %(default)s)")
+    ps.add_argument("--loop", action="store_true", help="repeat the recording")
+    ps.add_argument("--duration", type=float, default=None, metavar="S", help="stop after S seconds")
+    ps.add_argument("--start", default="now", metavar="WHEN",
+                    help="now (default), recording, or a time (ISO 8601 or seconds since 1970)")
+    ps.add_argument("--free-run", action="store_true",
+                    help="start the recording at once, not at the first client's 'data on'")
+    ps.add_argument("--tile", type=int, default=1, metavar="K",
+                    help="serve every station K times (capacity tests; default: %(default)s)")
+    ps.add_argument("--time-base", type=int, default=1_000_000, metavar="N",
+                    help="TIME_BASE, FRACSEC counts per second (default: %(default)s)")
+    ps.add_argument("--fault", action="append", metavar="SPEC",
+                    help="inject a fault, KIND[=VALUE]@START[+DURATION][:STATION] (see above)")
+    ps.set_defaults(func=_pmu_sim)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
