@@ -202,6 +202,20 @@ def test_replay_equal_to_the_measurement_passes():
     assert window_scores(T, meas, response(0.10), MBASE).passed
 
 
+def test_modes_are_compared_only_where_the_replay_differs():
+    """wecc B78_G1's Q (ANDES line trip, its own records played back): the replay matches the
+    recording to 0.8 % of its oscillation, yet the two ring-down fits give 4.2 % and -0.6 %
+    damping; with the replay off by a third of the oscillation the same fits fail it."""
+    from jaxdse._app.windows import ChannelScore, Mode, _judge_modes
+
+    c = WindowCriteria()
+    sc = ChannelScore("Q_t", "event", 600, 11.79, 11.77, 0.0158, 0.0158, 0.0, 2.018, 2.010,
+                      Mode(0.549, 0.0423, 2.03), Mode(0.570, -0.0061, 1.28))
+    assert _judge_modes(sc, c, c.min_deviation_percent_mbase) == []
+    off = dataclasses.replace(sc, rms_error=0.7, aligned_rms_error=0.7)
+    assert any("damps at -0.6 %" in r for r in _judge_modes(off, c, c.min_deviation_percent_mbase))
+
+
 def test_five_times_the_peak_deviation_fails_on_the_peak():
     result = window_scores(T, measured(), response(0.10, scale=5.0), MBASE)
     assert not result.passed

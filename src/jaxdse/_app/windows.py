@@ -90,6 +90,12 @@ class WindowCriteria:
     difference is within the recording's noise (and a measured mode is not compared)."""
     mode_delay_s: float = 0.2
     """The ring-down fit starts this long after the onset, past the switching transient [s]."""
+    mode_match_fraction: float = 0.1
+    """Modes are compared only where the replay differs from the recording: an event-window
+    RMS error (time-aligned) within this fraction of the measured oscillation RMS means the two
+    swing alike, and the ring-down fits' differences are the fits' own (a damping ratio off by
+    the 25 % that ``min_damping_ratio_fraction`` allows shows as some 30 % of the oscillation)
+    [-]."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -525,7 +531,10 @@ def _judge(sc: ChannelScore, c: WindowCriteria, rms_limit: float, tol: float) ->
 
 
 def _judge_modes(sc: ChannelScore, c: WindowCriteria, tol: float) -> list[str]:
-    """Dominant-mode tests of the event window (damping ratio, frequency, presence)."""
+    """Dominant-mode tests of the event window (damping ratio, frequency, presence); none where
+    the replay swings as the recording does (``mode_match_fraction``)."""
+    if sc.aligned_rms_error <= c.mode_match_fraction * sc.oscillation_measured:
+        return []
     k = sc.channel
     fm, zm, am = sc.mode_measured
     fs, zs, as_ = sc.mode_simulated
