@@ -36,6 +36,15 @@ X''d below Xl on every GENROU), simulated for the three events only::
     $A experiments/andes_bench/generate.py --case npcc_exdc2 --scenario line_trip load_step gen_trip
     $A experiments/andes_bench/generate.py --case npcc_xd2_below_xl --scenario line_trip load_step gen_trip
 
+``ieee14_lib``, ``npcc_lib``, ``wecc_lib`` (the recorded units' exciters swapped to the PSS/E
+library models of issue 33 that ANDES 2.0 has, every second governor to IEESGO; see "derived cases
+with the PSS/E library models" below), simulated for the line trip and the load step, without the
+round trip (ANDES's .dyr reader takes ESAC1A and ESST1A constants in another order than the PSS/E
+order written); ``new_models.py`` plays them back::
+
+    S="--scenario line_trip load_step --no-verify"
+    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib wecc_lib $S
+
 Options: ``--scenario`` (any of line_trip, load_step, gen_trip, ambient; none: only rewrite and
 verify the .raw/.dyr), ``--no-verify`` (skip the .raw/.dyr round trip), ``--step-check`` (rerun at
 half the step and record the largest differences). Several runs of one case (e.g. one per scenario,
@@ -1352,8 +1361,9 @@ def write_manifest():
                  f"{t['andes_version']}); recorded: {t['selection_rule']}.", ""]
         if "derived_case" in t:
             d = t["derived_case"]
-            rows += [f"Derived by `{d['function']}` in generate.py: {d['description']} ("
-                     + ", ".join(f"{k} = {v:g}" for k, v in d.get("constants", {}).items()) + ")", ""]
+            consts = ", ".join(f"{k} = {v:g}" for k, v in d.get("constants", {}).items())
+            rows += [f"Derived by `{d['function']}` in generate.py: {d['description']}"
+                     + (f" ({consts})" if consts else ""), ""]
         if t["added_to_case"]:
             added = ", ".join(f"{a['model']} on {a['machine']}" for a in t["added_to_case"])
             rows += [f"Added to the case: {added} (data in truth.json).", ""]
