@@ -145,14 +145,20 @@ def test_unsupported_exciter_model_leaves_the_unit_out(case):
     assert "EXELI" in line and f"line {LINE_EXELI}" in line and "not simulated" in line
 
 
-def test_invalid_genrou_is_refused_naming_the_record(case):
+def test_odd_genrou_is_used_as_given_and_an_unevaluable_one_refused(case, tmp_path):
+    """Bus 3's X''d = 0.7 lies above X'd = 0.6: odd, but the GENROU equations can be evaluated
+    (PSS/E warns and simulates it), so the unit plays back as given and starts steady. With
+    X'd = Xl the equations divide by zero: refused, naming the record."""
     dyr, raw = case
     um = unit_model(dyr, raw, 3, "1")
-    assert um.unit is None
-    assert len(um.missing) == 1
+    assert um.unit is not None and um.missing == []
+    steady_check(dyr, raw, 3, um.unit)
+    (tmp_path / "bad.dyr").write_text(DYR.replace("1.8 1.75 0.6 0.8 0.7 0.15", "1.8 1.75 0.15 0.8 0.1 0.15"))
+    um = unit_model(jd.read_dyr(tmp_path / "bad.dyr"), raw, 3, "1")
+    assert um.unit is None and len(um.missing) == 1
     line = um.missing[0]
-    assert line.startswith(f"GENROU on bus 3 id '1' (case.dyr line {LINE_GENROU_3})")
-    assert "X''d" in line
+    assert line.startswith(f"GENROU on bus 3 id '1' (bad.dyr line {LINE_GENROU_3})")
+    assert "X'd" in line and "Xl" in line
 
 
 def test_unit_without_exciter_record_builds_with_a_note(case):
