@@ -150,6 +150,21 @@ def block() -> str:
                        f"{dp['playback']['per_unit_s']:.3f} s per unit (compile apart; first call "
                        f"{dp['playback']['first_call_s']:.1f} s); a 3-event ranking and calibration of one "
                        f"unit {dp['calibration']['wall_s']:.0f} s (first run {dp['calibration']['first_run_s']:.0f} s).")
+        rc = tb.get("real_case_fleet")
+        if rc:
+            progs = rc["programs"]
+            left = len(rc["units_left_out"]) + len(rc["units_not_flat_or_failed"])
+            out.append(
+                f"- **A real case end to end** (`{rc['command']}`, {rc['machine']}, load average "
+                f"{rc['load_average_at_start'][0]:.1f} at the start): `jaxdse fleet` with the .dyr playback "
+                f"on ACTIVSg2000, {rc['units_run']} of its {rc['synchronous_units']} synchronous units "
+                f"({left} left out: not simulated, or not holding their power flow), each with its own "
+                f"records and a {rc['recording']['event_s']:.0f} s event at "
+                f"{rc['recording']['frames_per_s']:.0f} frames/s ({rc['recording']['tve_percent']} % TVE): "
+                f"{rc['cold']['wall_s']:.0f} s cold, {rc['warm']['wall_s']:.0f} s warm (persistent "
+                f"cache; {rc['per_unit_s']['warm']:.2f} s per unit); {progs['playback']} playback "
+                f"programs for {rc['model_chains']} model chains, {progs['assessment']} of the "
+                f"assessment; {rc['played_back_with_own_records']} units played back with their own records.")
         fs = tb.get("fleet_scaling")
         if fs:
             out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "

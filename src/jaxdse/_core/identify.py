@@ -655,5 +655,11 @@ def _result(theta, cov, info, w_s, samples, spread, spread_fits, levels, output_
 
 def condition_number(information) -> float:
     """Condition number of an :attr:`Identified.information` matrix (host side, NumPy)."""
-    eig = np.linalg.eigvalsh(np.asarray(information, dtype=float))
+    m = np.asarray(information, dtype=float)
+    if not np.all(np.isfinite(m)):        # a failed solve: eigvalsh would raise LinAlgError
+        return float("nan")
+    try:
+        eig = np.linalg.eigvalsh(m)
+    except np.linalg.LinAlgError:
+        return float("nan")
     return float(eig[-1] / max(eig[0], 1e-300)) if np.all(np.isfinite(eig)) else float("nan")
