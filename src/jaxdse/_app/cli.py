@@ -1,5 +1,5 @@
 """Command-line interface: ``jaxdse run CONFIG.toml``, ``sweep``, ``tune``, ``fleet FLEET.toml``,
-``validate CONFIG.toml``, ``pmu-sim RECORDING.toml``
+``validate CONFIG.toml``, ``check CASE.toml``, ``pmu-sim RECORDING.toml``
 and ``demo``.
 
 User mistakes end in a one-line error on stderr and exit status 2, never a traceback.
@@ -314,6 +314,63 @@ examples:
 """
 
 
+CHECK_HELP = """\
+The first thing to run on a PSS/E dynamic case: does every synchronous unit start at rest and
+settle after a small disturbance, with the records as they are? No recordings needed.
+
+Every in-service generator with a machine record in the .dyr (a synchronous unit) gets its own
+model from its records (machine, exciter, stabiliser, governor: README lists what jaxdse
+simulates), initialised from the power flow at its terminal (the .raw PG, QG on MBASE and the
+bus voltage VM, VA), and two runs with the terminal voltage imposed, as `jaxdse fleet` plays a
+recording back (PSS/E PLBVFU1):
+
+  held   the voltage held: every state derivative at t = 0 below 1e-6 (pu/s), P and Q at
+         20 s within 1e-5 pu of the power flow
+  step   the voltage stepped by 2 % at 1 s, Vref moved with it (the imposed voltage leaves the
+         regulator's loop open: a regulator with integral action would otherwise wind up to
+         its limit and slip poles); bounded (speed within 5 %, rotor angle within pi: no pole
+         slipped) and settled at 21 s: over the last 5 s P and Q within 10 % of the range they
+         span after the step (at least 0.001 pu) of their final value, speed within 1e-4 pu,
+         every state derivative below 1e-2
+
+Outcome per unit:
+  pass            both runs as above, every record simulated
+  data problem    a record whose values cannot be simulated (an inverted limit, a negative time
+                  constant: the model's own checks name the CON and its value), or whose initial
+                  operating point needs a signal outside the record's limits, e.g.
+                  "IEEEG1 on bus 2057 id '1' (case.dyr line 124): GV0 = TM0/(K1 + K3 + K5 + K7)
+                  = 1.949 above PMAX = 0.5207 (K1 + K3 + K5 + K7 = 0.3407)": the record's own
+                  values show that the unit cannot hold its power flow
+  not supported   a record of a model jaxdse does not simulate (named)
+  fail            every record simulated and no value at fault, yet not steady or not settled
+                  (the reasons give the numbers)
+Units of one model structure run in one compiled, vmapped call.
+
+CASE.toml: a fleet file's [case] is enough (paths relative to the file); a whole fleet file
+serves as it is (its other sections are not read):
+  [case]       raw = "case.raw" (PSS/E rev 32-36), dyr = "case.dyr" (or a list of .dyr files,
+               later records replacing earlier ones of the same machine and model)
+  [playback]   optional: solver = "tsit5" (fixed step, 1/(30 x substeps) s) | "kvaerno5",
+               substeps (4: PSS/E's half-cycle step), ke_zero = "psse" | "literal"
+
+Prints a table (units by model chain, every unit that does not pass with its first reason,
+the counts). With --out DIR:
+  DIR/check.json   "units": name, bus, id, models {machine, exciter, stabiliser, governor:
+                   PSS/E names or null}, outcome, reasons (lines), notes, numbers (derivatives
+                   at t = 0, P/Q errors, the step's ranges and spreads); "summary": the count of
+                   each outcome, by model chain, the models not supported; "check": the runs'
+                   definition
+  DIR/check.html   the same as a page: counts, reasons, sortable table
+
+Exit status: 0 whatever the outcomes; 2 on unreadable input (a missing or malformed file, no
+synchronous unit) with a one-line message.
+
+examples:
+  jaxdse check experiments/activsg2000/case.toml --out activsg2000_check/
+  jaxdse check experiments/andes_bench/fleet_npcc.toml
+"""
+
+
 STRICT_HELP = "exit with status 3 when any unit's verdict is not 'identified'"
 
 
@@ -331,6 +388,13 @@ def _fleet(args) -> int:
     from .fleet_file import load_fleet
 
     return _strict(args, run_fleet(load_fleet(args.fleet), Path(args.out))["units"])
+
+
+def _check(args) -> int:
+    from .check import run_check
+
+    run_check(args.case, Path(args.out) if args.out else None, out_of_service=args.out_of_service)
+    return 0
 
 
 def _validate(args) -> int:
@@ -414,6 +478,13 @@ def build_parser() -> argparse.ArgumentParser:
     va.add_argument("config", metavar="CONFIG.toml", help="fleet file with [calibrate]")
     va.add_argument("--out", metavar="DIR", required=True, help="output folder")
     va.set_defaults(func=_validate)
+    ch = sub.add_parser("check", help="no-disturbance check of every synchronous unit of a PSS/E case",
+                        description=CHECK_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ch.add_argument("case", metavar="CASE.toml", help="a file with [case] raw, dyr (a fleet file serves)")
+    ch.add_argument("--out", metavar="DIR", default=None, help="write DIR/check.json and DIR/check.html")
+    ch.add_argument("--out-of-service", action="store_true",
+                    help="also check the units switched off in the .raw (STAT = 0), at their PG, QG")
+    ch.set_defaults(func=_check)
     ps = sub.add_parser("pmu-sim", help="serve a recording as a live C37.118 PMU stream (loopback)",
                         description=PMU_SIM_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     ps.add_argument("recording", metavar="RECORDING-or-FLEET.toml",

@@ -24,6 +24,10 @@ from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .unit import DyrUnit
 
+PSSE_MACHINE_MODELS = frozenset({
+    "CGEN1", "FRECHG", "GENCLS", "GENDCO", "GENQEC", "GENROE", "GENROU", "GENSAE", "GENSAL",
+    "GENTPF", "GENTPJ", "GENTRA"})
+"""Synchronous machine models of the PSS/E model library (simulated or not)."""
 PSSE_EXCITER_MODELS = frozenset({
     "AC7B", "AC8B", "BBSEX1", "BUDCZT", "CELIN", "DC3A", "EMAC1T", "ESAC1A", "ESAC2A", "ESAC3A",
     "ESAC4A", "ESAC5A", "ESAC6A", "ESAC8B", "ESDC1A", "ESDC2A", "ESST1A", "ESST2A", "ESST3A",
@@ -58,8 +62,10 @@ class UnitModel:
         return tuple(self.models.get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
 
 
-def _kind(record: DyrRecord) -> str:
-    if record.model in MACHINES or record.kind == "machine":
+def record_kind(record: DyrRecord) -> str:
+    """"machine", "exciter", "stabiliser", "governor" or "other": what a record models, by its
+    PSS/E name (a model of the PSS/E library jaxdse does not simulate included)."""
+    if record.model in PSSE_MACHINE_MODELS or record.model in MACHINES or record.kind == "machine":
         return "machine"
     if record.model in PSSE_EXCITER_MODELS or record.model in EXCITERS:
         return "exciter"
@@ -78,7 +84,7 @@ def unit_model(dyr: DyrData, raw: RawCase, bus: int, machine_id: str, *,
     out = UnitModel(unit=None)
     parts: dict[str, object] = {}
     for rec in dyr.unit_records(bus, machine_id):
-        kind = _kind(rec)
+        kind = record_kind(rec)
         if kind == "other":
             out.notes.append(f"{record_label(rec)}: not a machine, exciter, stabiliser or governor "
                              "model; left out of the playback")
@@ -127,4 +133,5 @@ def unit_model(dyr: DyrData, raw: RawCase, bus: int, machine_id: str, *,
     return out
 
 
-__all__ = ["PSSE_EXCITER_MODELS", "PSSE_STABILISER_MODELS", "UnitModel", "unit_model"]
+__all__ = ["PSSE_EXCITER_MODELS", "PSSE_MACHINE_MODELS", "PSSE_STABILISER_MODELS", "UnitModel",
+           "record_kind", "unit_model"]

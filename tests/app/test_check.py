@@ -1,0 +1,166 @@
+"""``jaxdse check``: the no-disturbance check of every synchronous unit of a case.
+
+A case of five units from the ANDES bench (ieee14) with three records made bad: an exciter with
+an inverted limit (VIMAX below VIMIN), a governor whose VMAX lies below the unit's initial
+valve position, and an exciter model jaxdse does not simulate (EXST2). Its check.json fields,
+the exit status, the console table; the case loader; the limits found at the initial state.
+The three units that are simulated share one model structure: one compile.
+"""
+
+import json
+import shutil
+from pathlib import Path
+
+import jax.numpy as jnp
+import pytest
+
+from jaxdse._app.check import load_case
+from jaxdse._app.cli import main
+from jaxdse._dyr.limits import Start, describe, exciter_crossings, governor_crossings
+from jaxdse._models.base import ExciterInputs
+from jaxdse._models.exciters import ESST4B
+from jaxdse._models.governors import IEEEG1
+
+BENCH = Path(__file__).resolve().parents[2] / "experiments" / "andes_bench" / "data" / "ieee14"
+
+
+def _case(tmp_path: Path, dyr_edit=lambda text: text, toml="") -> Path:
+    shutil.copy(BENCH / "ieee14.raw", tmp_path / "case.raw")
+    (tmp_path / "case.dyr").write_text(dyr_edit((BENCH / "ieee14.dyr").read_text()))
+    path = tmp_path / "case.toml"
+    path.write_text('[case]\nraw = "case.raw"\ndyr = "case.dyr"\n' + toml)
+    return path
+
+
+def _bad(text: str) -> str:
+    """Bus 2: EXST1 -> EXST2 (not simulated); bus 3: ESST3A VIMAX -0.2 < VIMIN 0.2; bus 6:
+    TGOV1 VMAX 0.25, VMIN 0 (its unit starts at PG/MBASE = 0.3)."""
+    text = text.replace("2 'EXST1' 1 0.02 99 -99 0 0.02 50\n    0.02 9999 -9999 0 0.01 1 /",
+                        "2 'EXST2' 1 0.02 50 0.02 9999 -9999 0 0.01 1 1 0.2 1 0.5 0.05 /")
+    lines = text.splitlines()
+    k = lines.index("3 'ESST3A' 1 0.02 0.2 -0.2 8 1 5")
+    lines[k] = "3 'ESST3A' 1 0.02 -0.2 0.2 8 1 5"
+    k = lines.index("6 'TGOV1' 1 0.05 0.05 1.05 0.3 1 2.1")
+    lines[k] = "6 'TGOV1' 1 0.05 0.05 0.25 0.0 1 2.1"
+    return "\n".join(lines) + "\n"
+
+
+@pytest.fixture(scope="module")
+def checked(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("check")
+    case = _case(tmp, _bad, '[playback]\nke_zero = "literal"\n')
+    return main(["check", str(case), "--out", str(tmp / "out")]), tmp / "out"
+
+
+def test_outcomes_reasons_and_json(checked):
+    rc, out = checked
+    assert rc == 0  # whatever the outcomes
+    doc = json.loads((out / "check.json").read_text())
+    units = {e["name"]: e for e in doc["units"]}
+    assert set(units) == {"1_1", "2_1", "3_1", "6_1", "8_1"}
+    for e in doc["units"]:
+        assert {"name", "bus", "id", "models", "outcome", "reasons"} <= set(e)
+        assert set(e["models"]) == {"machine", "exciter", "stabiliser", "governor"}
+        assert e["outcome"] in ("pass", "data problem", "not supported", "fail")
+        assert isinstance(e["reasons"], list) and all(isinstance(r, str) for r in e["reasons"])
+    assert units["1_1"]["models"] == {"machine": "GENROU", "exciter": "ESST3A", "stabiliser": None,
+                                      "governor": "TGOV1"}
+    assert [units[n]["outcome"] for n in ("1_1", "8_1")] == ["pass", "pass"]
+    assert units["1_1"]["reasons"] == [] and units["1_1"]["numbers"]["max_dxdt_t0"] < 1e-6
+    assert abs(units["1_1"]["numbers"]["p_error_held_pu"]) < 1e-5
+    # the unsupported model, named
+    assert units["2_1"]["outcome"] == "not supported"
+    assert units["2_1"]["models"]["exciter"] == "EXST2"
+    assert "EXST2" in units["2_1"]["reasons"][0] and "not simulated" in units["2_1"]["reasons"][0]
+    # the inverted limit: the record, the CON and both values
+    bad = units["3_1"]
+    assert bad["outcome"] == "data problem"
+    assert "ESST3A on bus 3 id '1'" in bad["reasons"][0] and "line" in bad["reasons"][0]
+    assert "VIMAX" in bad["reasons"][0] and "-0.2" in bad["reasons"][0] and "VIMIN" in bad["reasons"][0]
+    # the initial state outside a limit: the signal, its value, the CON and its value
+    low = units["6_1"]
+    assert low["outcome"] == "data problem"
+    assert low["reasons"][0].startswith("TGOV1 on bus 6 id '1'")
+    assert "valve0 = TM0 = 0.3 above VMAX = 0.25" in low["reasons"][0]
+    assert low["limits"][0]["con"] == "VMAX" and low["limits"][0]["bound"] == 0.25
+    assert any(r.startswith("hence: not steady at t = 0") for r in low["reasons"])
+    s = doc["summary"]
+    assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (5, 2, 2, 1, 0)
+    assert s["not_supported_models"] == {"EXST2": 1}
+    assert s["data_problems"]["TGOV1 VMAX (valve0 above)"] == 1
+    assert s["compiled_programs"] == 1  # the simulated units share one structure
+    page = (out / "check.html").read_text()
+    assert "sortable" in page and "EXST2" in page and "data problem" in page
+
+
+def test_console_table(checked):
+    from jaxdse._app.check import console_table
+
+    _, out = checked
+    text = console_table(json.loads((out / "check.json").read_text()))
+    lines = text.splitlines()
+    assert "5 synchronous unit(s)" in lines[0]
+    assert any(line.split()[:6] == ["GENROU", "ESST3A", "-", "TGOV1", "4", "2"] for line in lines)
+    assert any(line.strip().startswith("2_1") and "not supported" in line for line in lines)
+    assert any(line.strip().startswith("6_1") and "VMAX" in line for line in lines)
+    assert lines[-1].startswith("2 pass (40.0 %), 2 data problem, 1 not supported, 0 fail, of 5")
+
+
+@pytest.mark.parametrize("what", ["missing", "no_case", "unknown", "malformed", "no_machine", "no_file"])
+def test_unreadable_input_is_exit_2_with_one_line(tmp_path, capsys, what):
+    path = _case(tmp_path)
+    if what == "missing":
+        path = tmp_path / "nope.toml"
+    elif what == "no_case":
+        path.write_text('[playback]\nsolver = "tsit5"\n')
+    elif what == "unknown":
+        path.write_text(path.read_text() + "[speling]\nx = 1\n")
+    elif what == "malformed":
+        path.write_text("[case\n")
+    elif what == "no_machine":
+        (tmp_path / "case.dyr").write_text("1 'TGOV1' 1 0.05 0.05 1.05 0.3 1 2.1 0 /\n")
+    else:
+        (tmp_path / "case.raw").unlink()
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("jaxdse: error:") and "\n" not in err
+
+
+def test_loader_takes_a_case_alone_or_a_fleet_file(tmp_path):
+    case = load_case(_case(tmp_path, toml='[playback]\nsolver = "kvaerno5"\nsubsteps = 2\n'))
+    assert case.playback.solver == "kvaerno5" and case.playback.substeps == 2
+    assert len(case.raw.generators) == 5 and case.dyr.machines
+    fleet = load_case(BENCH.parents[1] / "fleet_ieee14.toml")  # [measurement] etc. not read
+    assert fleet.playback.ke_zero == "literal"
+
+
+def test_help_teaches(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["check", "--help"])
+    assert exit_.value.code == 0
+    text = capsys.readouterr().out
+    for word in ("CASE.toml", "data problem", "not supported", "check.json", "--out", "Exit status"):
+        assert word in text
+
+
+# --- the limits of the initial state ----------------------------------------------------------
+
+def test_exciter_and_governor_limits_at_the_initial_state():
+    """ESST4B with a weak potential source (KP = 1): EFD0 = 1.3 needs VM0 = EFD0/VB above VMMAX;
+    IEEEG1 with K1 + K3 + K5 + K7 = 0.5: TM0 = 0.6 needs GV0 = 1.2 above PMAX = 1."""
+    inputs = ExciterInputs(*(jnp.asarray(x) for x in (1.0, 1.0, 0.0, 0.6, -0.1, 1.3, 0.0)))
+    model = ESST4B(kp=1.0, ki=0.0, kc=0.1, vm_max_pu=1.0)
+    state, vref = model.initial_state(1.3, inputs)
+    start = Start(efd0=1.3, tm0=0.6, vt=1.0, ifd=1.3, vref=float(vref))
+    crossings = exciter_crossings("ESST4B", model, state, start)
+    assert [(c.con, c.side) for c in crossings] == [("VMMAX", "above")]
+    vb = float(model.vb(inputs))
+    assert crossings[0].value == pytest.approx(1.3 / vb) and vb < 1.3
+    assert describe(crossings[0]).startswith(f"VM0 = EFD0/VB = {1.3 / vb:.4g} above VMMAX = 1 (VB = ")
+    assert exciter_crossings("ESST4B", ESST4B(kp=6.0), ESST4B(kp=6.0).initial_state(1.3, inputs)[0],
+                             start) == []
+    gov = IEEEG1(k1=0.3, k3=0.2, k5=0.0, k7=0.0, p_max_pu=1.0)
+    (c,) = governor_crossings("IEEEG1", gov, start)
+    assert (c.con, c.value, c.bound, c.side) == ("PMAX", pytest.approx(1.2), 1.0, "above")
+    assert "K1 + K3 + K5 + K7 = 0.5" in describe(c)
+    assert exciter_crossings("NOTAMODEL", model, state, start) == []
