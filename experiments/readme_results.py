@@ -72,6 +72,28 @@ def block() -> str:
             f"{e2['median_rms_Q_percent_mbase']:.4f} % (largest {e2['max_rms_Q_percent_mbase']:.3f} %, "
             f"ANDES's speed factor on EFD); against ANDES's IEEEX1 (its EXDC2 without that factor) Q median "
             f"{nsf['median_rms_Q_percent_mbase']:.4f} %, largest {nsf['max_rms_Q_percent_mbase']:.3f} %.")
+    nm = load("experiments/andes_bench/new_models.json")
+    if nm:
+        s = nm["summary"]
+        out.append(
+            f"- **The PSS/E library models of real cases against ANDES** (`experiments/andes_bench/new_models.md`, "
+            f"`python experiments/andes_bench/new_models.py`): {', '.join(nm['by_model'])} on "
+            f"{s['units']} units ({s['machine_recordings']} machine-recordings, line trip and load step): median "
+            f"RMS error P {s['median_rms_P_percent_mbase']:.4f} %, Q {s['median_rms_Q_percent_mbase']:.4f} % of "
+            f"MBASE, largest P {s['max_rms_P_percent_mbase']:.3f} %, Q {s['max_rms_Q_percent_mbase']:.3f} %; "
+            f"event-window peak error within 10 % for {s['event_peak_within_10_percent']}; "
+            f"{s['models_meeting_targets']} of {len(nm['by_model'])} models meet the targets.")
+    fr = load("experiments/andes_bench/fleet_results.json")
+    if fr:
+        rows = fr["rows"]
+        own = [r for r in rows if r["validation_model"] == "dyr"]
+        out.append(
+            f"- **Model validation of the ANDES bench** (`experiments/andes_bench/fleet_results.md`, `jaxdse "
+            f"fleet` on the nine bench fleets, whose .dyr is the truth): played back with each unit's own "
+            f"records for {len(own)} of {len(rows)} machine-recordings; "
+            f"{sum(r['validation'] == 'pass' for r in own)} pass the window criteria, "
+            f"{sum(r['validation'] == 'fail' for r in own)} fail (false alarms on a true model), "
+            f"{sum(r['validation'] == 'not judged' for r in own)} not judged.")
     cal = load("experiments/andes_bench/calibration.json")
     if cal:
         s = cal["summary"]
@@ -79,7 +101,11 @@ def block() -> str:
             f"- **Calibration of planted .dyr errors** (`experiments/andes_bench/calibration.md`): "
             f"{s['machines']} machines, H, exciter gain and droop planted wrong, three events jointly: "
             f"H within 1 % for {s['H_within_1_percent_noise_free']}, every identifiable parameter within "
-            f"10 % for {s['identifiable_within_10_percent']}; 95 % intervals cover the truth in "
+            f"10 % for {s['identifiable_within_10_percent']}"
+            + (f", every identifiable planted error changed (and filed) for {s['planted_identifiable_changed']}, "
+               f"parameters changed that were not planted: {s['changed_not_planted']}"
+               if "changed_not_planted" in s else "")
+            + "; 95 % intervals cover the truth in "
             f"{s['coverage_percent_all']:.1f} % of {s['noisy_draws']} noisy draws over {s['noisy_machines']} "
             f"machines (H: "
             f"{s['coverage_percent_H']:.1f} %).")
@@ -90,8 +116,8 @@ def block() -> str:
             f"- **OSL case 1, .dyr against surrogate playback** (`experiments/naspi_osl_case1/dyr_playback.md`): "
             f"median RMS error of Q {s['median_rms_Q_percent_mbase']['dyr']:.2f} % of MBASE with the "
             f".dyr records, {s['median_rms_Q_percent_mbase']['surrogate']:.2f} % with the surrogate; "
-            f"plants passing the windowed criteria: {s['pass_windows']['dyr']} (.dyr), "
-            f"{s['pass_windows']['surrogate']} (surrogate) of {s['plants']}.")
+            f"plants whose model validation passes the window criteria: {s['pass_windows']['dyr']} (.dyr), "
+            f"{s['pass_windows']['surrogate']} (surrogate, P only) of {s['plants']}.")
     naspi = load("experiments/naspi_osl_case1/results.json")
     if naspi:
         rows = [r for r in naspi["plants"] if r.get("H_s") is not None]
