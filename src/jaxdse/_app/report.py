@@ -140,13 +140,6 @@ def _reason_text(key: str, ident, online: dict) -> str:
         return (f"the measured power answers the frequency {k:.2f}x as strongly as the governor's "
                 f"droop allows (governor correction {100 * (k - 1):+.0f} %): if the governor data are "
                 f"right, the power and H are {k:.2f}x too large: {cause}")
-    if key == "power_above_droop" and ident is not None:
-        k = 1.0 + float(ident.governor_gain_error)
-        cause = ("a current logged as peak instead of RMS (x1.414)?" if abs(k - 2**0.5) < 0.12
-                 else "a CT ratio or a base?")
-        return (f"the measured power answers the frequency {k:.2f}x as strongly as the governor's "
-                f"droop allows (governor correction {100 * (k - 1):+.0f} %): if the governor data are "
-                f"right, the power and H are {k:.2f}x too large: {cause}")
     if key == "negative_damping" and ident is not None:
         return (f"D = {float(ident.d_pu_s):.3g} < 0 with 95 % confidence: the 3rd-order model lumps the "
                 "excitation and stabiliser damping into D")
