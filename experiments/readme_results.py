@@ -179,12 +179,14 @@ def block() -> str:
         rc = tb.get("real_case_fleet")
         if rc:
             progs = rc["programs"]
-            left = len(rc["units_left_out"]) + len(rc["units_not_flat_or_failed"])
+            left = (len(rc["units_left_out"]), len(rc["units_not_flat_or_failed"]),
+                    len(rc.get("fleet_skipped", [])))
             out.append(
                 f"- **A real case end to end** (`{rc['command']}`, {rc['machine']}, load average "
                 f"{rc['load_average_at_start'][0]:.1f} at the start): `jaxdse fleet` with the .dyr playback "
                 f"on ACTIVSg2000, {rc['units_run']} of its {rc['synchronous_units']} synchronous units "
-                f"({left} left out: not simulated, or not holding their power flow), each with its own "
+                f"({left[0]} not simulated, {left[1]} not holding their power flow, {left[2]} skipped by the "
+                f"fleet's plausibility checks), each with its own "
                 f"records and a {rc['recording']['event_s']:.0f} s event at "
                 f"{rc['recording']['frames_per_s']:.0f} frames/s ({rc['recording']['tve_percent']} % TVE): "
                 f"{rc['cold']['wall_s']:.0f} s cold, {rc['warm']['wall_s']:.0f} s warm (persistent "
