@@ -323,8 +323,8 @@ case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revisio
 <ul>
 <li><b>Inertia H</b> (what the recording says about H): {', '.join(f'{_badge(v)} {n}' for v, n in s['verdicts'].items())}.
 Median |H − H<sub>.dyr</sub>|: <b>{_f(median, '.1f')} %</b>; {s['within_10_percent']} of {s['units']} within 10 %.
-Identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}
-{html.escape(', '.join(s['identified_outside_10_percent']))}.</li>
+Identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}{
+html.escape(' (' + ', '.join(s['identified_outside_10_percent']) + ')') if s['identified_outside_10_percent'] else ''}.</li>
 <li><b>Model validation</b> (NERC MOD-026-2: the played-back model against the recorded response):
 {results}; played back with {html.escape(models)}.</li>
 </ul>
