@@ -739,31 +739,19 @@ def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_p
     absent: 0); ``ra_pu``, ``x_source_pu``: the .raw ZSORCE."""
     w = 2 * jnp.pi * f_nominal_hz
     p = params
-    if model == "GENROU":
-        return GENROU(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_1_s=p["T'qo"], tq0_2_s=p["T''qo"],
-                      h_s=p["H"], d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"],
-                      xq1_pu=p["X'q"], x2_pu=p["X''d"], xl_pu=p["Xl"], s10=p["S(1.0)"],
-                      s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
-    if model == "GENSAL":
-        return GENSAL(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"],
-                      d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], x2_pu=p["X''d"],
-                      xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
-    if model in ("GENROE", "GENTPJ"):
-        extra = {"kis": p.get("Kis", 0.0)} if model == "GENTPJ" else {}
-        return MACHINES[model](
-            td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_1_s=p["T'qo"], tq0_2_s=p["T''qo"], h_s=p["H"],
-            d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], xq1_pu=p["X'q"],
-            x2_pu=p["X''d"], xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu,
-            omega_s_rad_s=w, **extra)
-    if model == "GENSAE":
-        return GENSAE(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"],
-                      d_pu=p["D"], xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], x2_pu=p["X''d"],
-                      xl_pu=p["Xl"], s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
     if model == "GENCLS":
         if x_source_pu is None or not x_source_pu > 0:
             raise ValueError("GENCLS needs the source reactance ZSORCE X > 0 from the .raw")
         return GENCLS(h_s=p["H"], d_pu=p["D"], x1_pu=x_source_pu, ra_pu=ra_pu, omega_s_rad_s=w)
-    raise ValueError(f"{model} is not a supported machine model ({', '.join(MACHINES)})")
+    if model not in MACHINES:
+        raise ValueError(f"{model} is not a supported machine model ({', '.join(MACHINES)})")
+    common = dict(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"], d_pu=p["D"],
+                  xd_pu=p["Xd"], xq_pu=p["Xq"], xd1_pu=p["X'd"], x2_pu=p["X''d"], xl_pu=p["Xl"],
+                  s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
+    if model in ("GENROU", "GENROE", "GENTPJ"):     # round rotor: a q-axis transient circuit too
+        extra = {"kis": p.get("Kis", 0.0)} if model == "GENTPJ" else {}
+        return MACHINES[model](tq0_1_s=p["T'qo"], xq1_pu=p["X'q"], **common, **extra)
+    return MACHINES[model](**common)                # salient pole: GENSAL, GENSAE
 
 
 __all__ = ["GENCLS", "GENROE", "GENROU", "GENSAE", "GENSAL", "GENTPJ", "MACHINES", "AbstractMachine",
