@@ -2,8 +2,9 @@
 
 XLA programs with host callbacks are never cached; diffrax's checks of ``SaveAt(ts=...)`` are
 equinox ``error_if`` host callbacks by default, so every ``jaxdse fleet`` run compiled every
-model chain anew (benchmarks/real_case_fleet.py: 13 chains of ACTIVSg2000). ``play_back``
-traces them as NaN selects (its ts cannot fail them) and leaves equinox's setting as it was.
+model chain anew (benchmarks/real_case_fleet.py: 13 chains of ACTIVSg2000). The fixed-step
+playback saves its steps instead (``SaveAt(steps=True)``, every ``substeps``-th kept), which
+has no such check, and equinox's own setting is never touched.
 """
 
 import equinox as eqx

@@ -10,12 +10,10 @@ handful of parameters, never a gradient of a scalar.
 
 from __future__ import annotations
 
-import contextlib
 from typing import Literal, NamedTuple
 
 import diffrax
 import equinox as eqx
-import equinox._errors as _eqx_errors
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -178,27 +176,6 @@ def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> Terminal
     return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
 
 
-@contextlib.contextmanager
-def _checks_without_callbacks():
-    """Trace equinox's runtime checks (``error_if``) as NaN selects, not host callbacks.
-
-    diffrax checks ``SaveAt(ts=...)`` (increasing, within [t0, t1]) with ``error_if``, whose
-    default is a host callback in the compiled program; XLA programs with host callbacks are
-    never written to the persistent compilation cache, so every run compiled every model chain
-    anew. Here ts are the frame indices 0 .. n-1 over [0, n-1], so the checks cannot fire; a
-    failure of the solve itself is reported by ``ok`` (``throw=False``). Trace time only; a
-    user's ``EQX_ON_ERROR=breakpoint`` is left alone."""
-    old = getattr(_eqx_errors, "EQX_ON_ERROR", None)
-    if old != "raise":
-        yield
-        return
-    _eqx_errors.EQX_ON_ERROR = "nan"
-    try:
-        yield
-    finally:
-        _eqx_errors.EQX_ON_ERROR = old
-
-
 def play_back(unit: DyrUnit, series: TerminalSeries,
               settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
     """Simulate ``unit`` with the recorded terminal voltage imposed (PLBVFU1 convention)."""
@@ -225,12 +202,21 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
     # Time in frames: diffeqsolve's t0, t1 and dt0 are constants, so its runtime check of their
     # signs (an error_if: a host callback) folds away and the executable can be cached.
     frames = float(ts.shape[0] - 1)
-    with _checks_without_callbacks():
+    if settings.solver == "tsit5":
+        # every fixed step saved and every substeps-th kept: the frames. SaveAt(ts=...) would
+        # check the ts with error_if, a host callback that keeps the program out of the cache
+        sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), solver, 0.0, frames, 1.0 / settings.substeps,
+                                  y0, saveat=diffrax.SaveAt(t0=True, steps=True),
+                                  stepsize_controller=controller, max_steps=max_steps, throw=False,
+                                  adjoint=diffrax.ForwardMode())
+        last = (ts.shape[0] - 1) * settings.substeps
+        ys = jax.tree_util.tree_map(lambda y: y[: last + 1: settings.substeps], sol.ys)
+    else:
         sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), solver, 0.0, frames, 1.0 / settings.substeps,
                                   y0, saveat=diffrax.SaveAt(ts=np.arange(ts.shape[0], dtype=float)),
                                   stepsize_controller=controller, max_steps=max_steps, throw=False,
                                   adjoint=diffrax.ForwardMode())
-    ys = sol.ys
+        ys = sol.ys
 
     def outputs(s, y):
         out, efd, tm, _ = unit.signals(y, inputs(s), refs)
