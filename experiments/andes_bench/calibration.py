@@ -51,6 +51,7 @@ MACHINES = (("npcc", "B50_G1", False), ("npcc", "B55_G1", False), ("npcc", "B21_
 """(case, unit, noisy draws?). The npcc units' IEEEX1 exciters have KE < 0 (self-excited): with
 the terminal voltage imposed their loop is open and unstable (pole +KE/TE), so the noise on
 the recorded voltage drives their field away within the 40 s and they take no noisy draws."""
+PARTIAL = HERE / "calibration.partial.json"
 WINDOW_S = 25.0
 TVE_PERCENT = 0.05
 PLANTS = ((1.2, 0.7, 1.3), (0.8, 1.3, 0.7))
@@ -93,6 +94,8 @@ def planted(unit, specs, factors):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=10)
+    ap.add_argument("--resume", action="store_true",
+                    help="keep the machines already in calibration.partial.json (written after each machine)")
     ap.add_argument("--report-only", action="store_true",
                     help="rewrite the summary and calibration.md from the fits stored in calibration.json")
     args = ap.parse_args()
@@ -104,9 +107,15 @@ def main():
     opts = jd.CalibrateOptions()
     fit = jd.PlaybackSettings(substeps=2, input_filter_hz=opts.input_filter_hz)
     cal = jd.CalibrationSettings()
-    rows, cover = [], []
+    rows, cover, wall_before = [], [], 0.0
+    if args.resume and PARTIAL.exists():
+        part = json.loads(PARTIAL.read_text())
+        rows, cover, wall_before = part["rows"], part["coverage"], part["wall_s"]
+    done = {(r["case"], r["unit"]) for r in rows}
     t_all = time.perf_counter()
     for k, (case, tag, with_noise) in enumerate(MACHINES):
+        if (case, tag) in done:
+            continue
         d = DATA / case
         truth = json.loads((d / "truth.json").read_text())
         m = next(x for x in truth["machines"] if x["tag"] == tag)
@@ -165,12 +174,16 @@ def main():
             print(f"  draw {draw}: H {rn.values[0]:.4f} [{rn.ci95[0][0]:.4f}, {rn.ci95[0][1]:.4f}]",
                   flush=True)
         rows.append(row)
+        PARTIAL.write_text(json.dumps({"rows": rows, "coverage": cover,
+                                       "wall_s": wall_before + time.perf_counter() - t_all}))
     doc = {"settings": {"window_s": WINDOW_S, "tve_percent": TVE_PERCENT, "substeps": fit.substeps,
                         "input_filter_hz": fit.input_filter_hz, "input_draws": cal.input_draws,
                         "max_relative_ci": cal.max_relative_ci},
-           "summary": summarise(rows, cover, round(time.perf_counter() - t_all, 1)), "rows": rows,
+           "summary": summarise(rows, cover, round(wall_before + time.perf_counter() - t_all, 1)),
+           "rows": rows,
            "coverage": cover}
     write(doc)
+    PARTIAL.unlink(missing_ok=True)
 
 
 def summarise(rows, cover, wall_s_total) -> dict:
