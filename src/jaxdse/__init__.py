@@ -52,12 +52,15 @@ from ._core.verdict import VERDICTS as VERDICTS
 from ._core.verdict import Verdict as Verdict
 from ._core.verdict import VerdictSettings as VerdictSettings
 from ._core.verdict import describe as describe
+from ._core.windowed import WindowSettings as WindowSettings
+from ._core.windowed import window_chunk as window_chunk
+from ._core.windowed import window_estimate as window_estimate
 from ._dyr.calibrate import Calibration as Calibration
 from ._dyr.calibrate import CalibrationSettings as CalibrationSettings
+from ._dyr.calibrate import Decision as Decision
 from ._dyr.calibrate import Events as Events
 from ._dyr.calibrate import ParameterSpec as ParameterSpec
 from ._dyr.calibrate import Ranking as Ranking
-from ._dyr.calibrate import Decision as Decision
 from ._dyr.calibrate import calibrate as calibrate
 from ._dyr.calibrate import calibrate_where_rejected as calibrate_where_rejected
 from ._dyr.calibrate import measured_pq as measured_pq
@@ -140,3 +143,8 @@ from ._sim.simulate import Scenario as Scenario
 from ._sim.simulate import Simulation as Simulation
 from ._sim.simulate import Truth as Truth
 from ._sim.simulate import simulate as simulate
+from ._stream.monitor import Monitor as Monitor
+from ._stream.monitor import load_monitor as load_monitor
+from ._stream.monitor import replay_recording as replay_recording
+from ._stream.online import OnlineGroup as OnlineGroup
+from ._stream.online import Update as Update

@@ -314,6 +314,55 @@ examples:
 """
 
 
+MONITOR_HELP = """\
+Live inertia monitoring: each unit's H and D, with their 95 % intervals, every update_s from
+the PMU streams an operator's PDC already receives (IEEE C37.118.2-2011, TCP or UDP).
+
+MONITOR.toml:
+  fleet = "fleet.toml"     # a fleet file or a run configuration: the plants, their bases and
+                           # the estimator's settings ([observer], [settings], [identify])
+  update_s = 1.0           # a new estimate per unit every update_s seconds
+  window_s = 120.0         # ... fitted on the last window_s seconds (first one after window_s)
+  [[stream]]               # one per PMU or PDC (or a single [stream] table)
+  host = "127.0.0.1"
+  port = 4712
+  idcode = 1
+  transport = "tcp"        # or "udp"
+  reorder_s = 0.2          # frames held this long for late ones
+  timeout_s = 5.0          # a silent connection is made again (back-off 0.5 s to 10 s)
+  current_direction = "out_of_plant"
+  units = ["G1", "G2"]     # the units this stream carries (default: all, with one stream)
+  [stream.stations]        # unit -> station name, where the name is not the unit's own
+  G1 = "PMU_PLANT_A"
+  [alarm]
+  h_below_s = 2.0          # an alarm when an identified H falls below this
+  hysteresis = 0.05        # ... cleared when it rises 5 % above it
+
+Per unit, the online identification runs chunk by chunk on the stream (the regression of
+`jaxdse run`'s [identify], its sums kept per update_s: the cost per frame does not grow with
+the window). Frames are placed by their timestamps on the reporting grid, never by arrival; a
+sample with a STAT data error, lost sync, NaN or an implausible value is not used; gaps up to
+the measurement's max_gap_s are bridged, longer ones restart the unit's estimator; a new
+configuration re-maps the stations and restarts their estimators. A window that does not
+excite H (ambient data) says "not excited" and gives no number; the last identified H stays
+in the line with its age.
+
+--out DIR gets updates.jsonl (one line per unit and update: t [s since 1970, the window's last
+frame], unit, H_s, H_ci95, D, D_ci95, verdict, reasons, age_s, last_H_s, alarm, delay_s), the
+stream as the monitor used it (recording_*.csv) with replay.toml, and monitor.json (frames,
+drops, late frames, disconnects, the delay from a frame's timestamp to its estimate). `jaxdse
+run DIR/replay.toml` replays the recording through the file readers: the same estimates.
+
+Listens nowhere; connects out only. Exit status 0 after --duration or on Ctrl-C; 2 on bad
+input with a one-line message.
+
+examples:
+  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712 --loop &
+  jaxdse monitor experiments/monitor/osl_monitor.toml --out live --duration 300
+  jaxdse run live/replay.toml --out replayed
+"""
+
+
 CHECK_HELP = """\
 The first thing to run on a PSS/E dynamic case: does every synchronous unit start at rest and
 settle after a small disturbance, with the records as they are? No recordings needed.
@@ -422,7 +471,16 @@ def _tune(args) -> int:
 
 def _run(args) -> int:
     from .._io.config import load_config
+    from .._io.schema import read_toml
     from .run import run_config
+
+    if "replay" in read_toml(Path(args.config)):
+        from .._stream.monitor import replay_recording
+
+        out = Path(args.out) if args.out else Path(args.config).parent / "replayed"
+        lines = replay_recording(args.config, out)
+        print(f"jaxdse run: {len(lines)} windowed update(s) replayed to {out / 'updates.jsonl'}", file=sys.stderr)
+        return 0
 
     summary = run_config(load_config(args.config), Path(args.out) if args.out else None)
     return _strict(args, summary["recordings"])
@@ -432,6 +490,20 @@ def _pmu_sim(args) -> int:
     from .._stream.pmu_sim import main as pmu_sim
 
     return pmu_sim(args)
+
+
+def _monitor(args) -> int:
+    from .._io.errors import InputError
+    from .._stream.monitor import Monitor, load_monitor
+
+    if args.duration is not None and not args.duration > 0:
+        raise InputError("monitor", f"--duration {args.duration} must be positive")
+    summary = Monitor(load_monitor(args.config), Path(args.out) if args.out else None).run(args.duration)
+    d = summary["delay_s"]
+    print(f"jaxdse monitor: {summary['updates']} update(s) in {summary['wall_s']:.0f} s"
+          + (f"; delay from frame to estimate: median {d['median']:.3f} s, 99 % {d['p99']:.3f} s" if d else ""),
+          file=sys.stderr)
+    return 0
 
 
 def _demo(args) -> int:
@@ -510,6 +582,14 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--fault", action="append", metavar="SPEC",
                     help="inject a fault, KIND[=VALUE]@START[+DURATION][:STATION] (see above)")
     ps.set_defaults(func=_pmu_sim)
+    mo = sub.add_parser("monitor", help="per-unit H and D every second from live PMU streams (C37.118)",
+                        description=MONITOR_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    mo.add_argument("config", metavar="MONITOR.toml", help="the monitor file (see above)")
+    mo.add_argument("--out", metavar="DIR", default=None,
+                    help="folder for updates.jsonl, the recording and monitor.json (default: none)")
+    mo.add_argument("--duration", type=float, default=None, metavar="S",
+                    help="stop cleanly after S seconds (default: run until Ctrl-C)")
+    mo.set_defaults(func=_monitor)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,
                           formatter_class=argparse.RawDescriptionHelpFormatter)

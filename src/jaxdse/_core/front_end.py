@@ -99,6 +99,16 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
                     dw=x2_meas / m.omega_s)
 
 
+def next_context(fe: FrontEnd, ctx: StreamContext | None, at) -> StreamContext:
+    """The context of a slice of a stream that starts at local sample ``at`` of the slice
+    whose front end is ``fe`` (``ctx``: that slice's own context, None for a stream's first)."""
+    before = jnp.arange(fe.p_lv.shape[0]) < at
+    p_sum, p_count = (0.0, 0) if ctx is None else (ctx.p_lv_sum, ctx.p_lv_count)
+    return StreamContext(p_sum + jnp.sum(jnp.where(before, fe.p_lv, 0.0)), p_count + at,
+                         fe.theta_ref[at], (fe.alg.delta_rad - fe.theta_ref)[at], fe.theta_t[at],
+                         None if fe.alg.q_state is None else fe.alg.q_state[at])
+
+
 def reference_torque(ts, fe: FrontEnd, gov: AbstractGovernor, settings: Settings):
     """T_ref from the quasi-steady state of the first ``qss_window_s`` (paper Sec. IV-A)."""
     qss = (ts < ts[0] + settings.qss_window_s) & fe.valid

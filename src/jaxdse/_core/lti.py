@@ -59,7 +59,7 @@ def solve_2x2(a, v):
     return jnp.stack([a[1, 1] * v[0] - a[0, 1] * v[1], a[0, 0] * v[1] - a[1, 0] * v[0]]) / det
 
 
-def filter_states(discretisation, u, reverse: bool = False):
+def filter_states(discretisation, u, reverse: bool = False, x0=None):
     """States of a unit-DC-gain filter in companion form (states [y, y', ...], see
     :func:`lag_chain`) at every sample (time first), exact for piecewise-linear u.
 
@@ -67,11 +67,13 @@ def filter_states(discretisation, u, reverse: bool = False):
     (poles, dt) and shared by every signal. The filter starts at rest at the first sample's
     value (as if u had been constant before): with a DC gain of 1 that is [u[0], 0, ...].
     ``reverse`` runs backwards in time (from the last sample), the second pass of a
-    zero-phase filter.
+    zero-phase filter. ``x0``: the state at the first sample (a stream's carried state) instead
+    of rest.
     """
     phi, g0, g1 = discretisation
     u = u[::-1] if reverse else u
-    x0 = jnp.zeros(phi.shape[0], dtype=u.dtype).at[0].set(u[0])
+    if x0 is None:
+        x0 = jnp.zeros(phi.shape[0], dtype=u.dtype).at[0].set(u[0])
     drive = g0[None, :] * u[:-1, None] + g1[None, :] * u[1:, None]  # [T-1, n], outside the loop
 
     def step(x, v):

@@ -116,24 +116,30 @@ class Verdict(eqx.Module):
     than ``max_governor_gain_error`` of a correction; ``weakly identified`` beyond."""
 
 
-def verdict(est: Estimate, ident: Identified, rep: Replay,
+def verdict(est: Estimate | None, ident: Identified, rep: Replay | None,
             settings: VerdictSettings = VerdictSettings(), h_model_error=0.0) -> Verdict:
     """The verdicts of one unit from its online estimate, its identification and its replay;
     ``h_model_error``: the relative error of H that a simplified estimator model can cause
-    (``Plant.h_model_error``; inf: unknown), which H's interval must cover for ``identified``."""
+    (``Plant.h_model_error``; inf: unknown), which H's interval must cover for ``identified``.
+    ``est`` and ``rep`` None (a stream's windowed identification): the checks that need them
+    are left out."""
     lo, hi = ident.h_ci95[0], ident.h_ci95[1]
-    drem_h = est.h_s
+    no = jnp.array(False)
+    drem_h = jnp.nan if est is None else est.h_s
+    converged, online = (no, ~no) if est is None else (est.converged, est.online)
+    solver_ok = ~no if est is None else est.solver_ok
+    rep_ok, smape_i = (~no, jnp.zeros(())) if rep is None else (rep.ok, rep.smape.i_t)
 
     def outside(h):
         return ~((h >= lo) & (h <= hi))
 
     d_lo, d_hi = ident.d_ci95[0], ident.d_ci95[1]
     flags = {
-        "offline": ~est.online,
-        "solver": ~(est.solver_ok & rep.ok),
+        "offline": ~online,
+        "solver": ~(solver_ok & rep_ok),
         "not_finite": ~ident.ok,
         "h_not_positive": ~(ident.a2 > 0),
-        "playback_diverged": ~(rep.smape.i_t <= settings.diverged_smape),
+        "playback_diverged": ~(smape_i <= settings.diverged_smape),
         "interval_very_wide": ~(ident.relative_ci <= settings.not_identified_ci) | ~jnp.isfinite(hi),
         "interval_wide": ~(ident.relative_ci <= settings.identified_ci),
         # An alternative counts only where the data cannot rule it out (its coefficient within
@@ -142,13 +148,13 @@ def verdict(est: Estimate, ident: Identified, rep: Replay,
         "h_rests_on_governor": outside(ident.h_without_governor_correction_s) & plausible_zero(ident, 3),
         "power_above_droop": (ident.governor_gain_error > settings.max_governor_excess)
                              & ~plausible_zero(ident, 3),
-        "drem_contradicts": est.converged & ~(jnp.abs(drem_h / ident.h_s - 1.0) <= settings.identified_ci),
+        "drem_contradicts": converged & ~(jnp.abs(drem_h / ident.h_s - 1.0) <= settings.identified_ci),
         "model_simplified": (h_model_error > 0) & ~(ident.relative_ci >= h_model_error),
         "negative_damping": d_hi < 0,
         "d_interval_wide": ~(0.5 * (d_hi - d_lo) <= jnp.abs(ident.d_pu_s)),
         "governor_model_off": ~(jnp.abs(ident.governor_gain_error) <= settings.max_governor_gain_error),
-        "drem_disagrees": est.converged & outside(drem_h),
-        "drem_not_converged": ~est.converged,
+        "drem_disagrees": converged & outside(drem_h),
+        "drem_not_converged": (est is not None) & ~converged,
     }
     reasons = sum(jnp.where(flags[name], _BIT[name], 0) for name in REASONS)
 

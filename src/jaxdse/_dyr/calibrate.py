@@ -181,13 +181,21 @@ def long_run_covariance(scores: np.ndarray, lag1: float, frames: float) -> tuple
 
 # --- coordinates -----------------------------------------------------------------------------
 
-def _to_z(x, spec: ParameterSpec):
+AT_BOUND = 1e-6
+"""A fitted value within this fraction of its bounds' span (in the fit's coordinates) of a bound
+sits on it."""
+
+
+def _unit_position(x, spec: ParameterSpec) -> float:
+    """Where ``x`` lies between the bounds, 0 to 1 (log scale for a positive parameter)."""
     if spec.positive:
         lo, hi = np.log(spec.lower), np.log(spec.upper)
-        u = (np.log(x) - lo) / (hi - lo)
-    else:
-        u = (x - spec.lower) / (spec.upper - spec.lower)
-    u = np.clip(u, 1e-9, 1 - 1e-9)
+        return float((np.log(x) - lo) / (hi - lo))
+    return float((x - spec.lower) / (spec.upper - spec.lower))
+
+
+def _to_z(x, spec: ParameterSpec):
+    u = np.clip(_unit_position(x, spec), 1e-9, 1 - 1e-9)
     return float(np.log(u) - np.log1p(-u))
 
 
@@ -399,6 +407,11 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     half = np.where(positive, np.hypot(half, cal.model_error * np.abs(x)), half)
     lower, upper = (np.array([getattr(s, k) for s in specs]) for k in ("lower", "upper"))
     ci = np.stack([np.maximum(x - half, lower), np.minimum(x + half, upper)], axis=1)  # within the bounds
+    # A value the fit pushed onto a bound: the data ask for beyond it, so the bound itself lies
+    # in the interval (one-sided), and a .dyr value at the bound (D = 0) is not rejected.
+    u = np.array([_unit_position(float(v), spec) for v, spec in zip(x, specs)])
+    ci[u <= AT_BOUND, 0] = lower[u <= AT_BOUND]
+    ci[u >= 1.0 - AT_BOUND, 1] = upper[u >= 1.0 - AT_BOUND]
     return Calibration([s.label for s in specs], x0, x, ci, np.asarray(_rms_pq(unit, events, settings)),
                        np.asarray(_rms_pq(fitted, events, settings)), rho, bandwidth, v_noise,
                        bool(sol.result == optx.RESULTS.successful), fitted, specs)

@@ -26,9 +26,9 @@ from .._core.drem import DremInputs, ObserverConfig, run_observer
 from .._core.estimate import external_torque, playback_governor
 from .._core.front_end import (
     FrontSums,
-    StreamContext,
     front_end,
     front_sums,
+    next_context,
     playback_inputs,
     reference_torque,
 )
@@ -90,16 +90,7 @@ def _observer_chunk(rec, plant, config, settings: Settings, ctx, carry, t_m, lea
     k = n_own - 1
     previous = Previous(t_own[k], jtu.tree_map(lambda x: x[k], inputs))
     sums = front_sums(fe, lead, lead + size)  # the slice's padding is masked by fe.valid
-    return obs.segments, (obs.last, previous, t_ref, delta0), obs.ok, sums, _next_context(fe, ctx, next_at)
-
-
-def _next_context(fe, ctx, at):
-    """The context of a slice that starts at local sample ``at`` of this one."""
-    before = jnp.arange(fe.p_lv.shape[0]) < at
-    p_sum, p_count = (0.0, 0) if ctx is None else (ctx.p_lv_sum, ctx.p_lv_count)
-    return StreamContext(p_sum + jnp.sum(jnp.where(before, fe.p_lv, 0.0)), p_count + at,
-                         fe.theta_ref[at], (fe.alg.delta_rad - fe.theta_ref)[at], fe.theta_t[at],
-                         None if fe.alg.q_state is None else fe.alg.q_state[at])
+    return obs.segments, (obs.last, previous, t_ref, delta0), obs.ok, sums, next_context(fe, ctx, next_at)
 
 
 @eqx.filter_jit

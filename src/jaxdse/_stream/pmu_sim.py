@@ -52,6 +52,7 @@ import threading
 import time
 from collections import deque
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -129,27 +130,14 @@ def load_source(path) -> Source:
     A unit whose recording cannot be conditioned is left out with a note when others remain
     (as ``jaxdse fleet`` does); with none left, the first error is raised (InputError)."""
     from .._io.errors import InputError
+    from .._io.measurement import condition
     from .._io.readers import load_table
-    from .._io.schema import read_toml
 
     path = Path(path)
-    data = read_toml(path)
-    notes: list[str] = []
-    if "case" in data:
-        from .._app.fleet_file import load_fleet
-
-        fleet = load_fleet(path)
-        units = [(p.name, p.run.measurement, p.run.plant.machine) for p in fleet.plants]
-        notes += [f"{s['name']}: not served ({s['reason']})" for s in fleet.skipped]
-    else:
-        from .._io.config import load_config
-
-        config = load_config(path)
-        units = [(g.name, g.measurement, g.plant.machine) for g in config.generators]
+    runs, skipped = source_units(path)[:2]
+    notes = [f"{name}: not served ({reason})" for name, reason in skipped]
     parts, first_error = [], None
-    from .._io.measurement import condition
-
-    for name, spec, machine in units:
+    for name, spec, machine in ((name, g.measurement, g.plant.machine) for name, g in runs):
         try:
             table = load_table(spec.file, spec.format, csv_options=spec.csv_options,
                                time_column=spec.columns.get("time"))
@@ -208,6 +196,39 @@ def load_source(path) -> Source:
             st.present[k] = True
         stations.append(st)
     return Source(path, stations, rate, lo, fnom, notes)
+
+
+class Units(NamedTuple):
+    """The units of a run configuration or a fleet file (:func:`source_units`)."""
+
+    runs: list
+    """(name, :class:`~jaxdse._io.config.GeneratorRun`) per unit."""
+    skipped: list
+    """(name, reason) of a fleet's plants left out."""
+    observer: object
+    settings: object
+    identify: object
+    verdict: object
+
+
+def source_units(path) -> Units:
+    """The units of a run configuration (its [[generator]]s) or a fleet file (its plants),
+    with the estimator's settings it gives."""
+    from .._core.identify import IdentifySettings
+    from .._io.schema import read_toml
+
+    path = Path(path)
+    if "case" in read_toml(path):
+        from .._app.fleet_file import load_fleet
+
+        fleet = load_fleet(path)
+        return Units([(p.name, p.run) for p in fleet.plants], [(s["name"], s["reason"]) for s in fleet.skipped],
+                     fleet.observer, fleet.settings, fleet.identify or IdentifySettings(), fleet.verdict)
+    from .._io.config import load_config
+
+    cfg = load_config(path)
+    return Units([(g.name, g) for g in cfg.generators], [], cfg.observer, cfg.settings,
+                 cfg.identify or IdentifySettings(), cfg.verdict)
 
 
 def _first_time(table, spec, quality) -> float:
@@ -848,6 +869,16 @@ class PmuClient:
         if any(isinstance(f, c3.ConfigFrame) for f in frames) and self._config_cmd is None:
             self._config_cmd = getattr(self, "_asked", None)
         return frames
+
+    def poll(self, seconds: float) -> list:
+        """The frames that are pending or arrive within ``seconds`` (returns at the first
+        arrival); ConnectionError when the PMU closed the connection."""
+        out = list(self.pending)
+        self.pending.clear()
+        deadline = time.monotonic() + seconds
+        while not out and time.monotonic() < deadline:
+            out += self._receive(deadline)
+        return out
 
     def frames(self, count: int | None = None, seconds: float | None = None):
         """Yield received frames (data frames, and any configuration or header frame), until

@@ -1,0 +1,245 @@
+"""Windowed identification of a1, a2 (H, D) on a stream, from sufficient statistics.
+
+:func:`~jaxdse._core.identify.identify` fits the filtered swing equation (paper App. Eq. 17)
+
+    F[s x2] = -a1 F[x2] + a2 F[Tm - Te] + c F[1] + g F[Tm - Tm(0)]
+
+to a whole recording. The filters are causal and LTI and the fit is linear, so on a stream
+it runs chunk by chunk (:func:`window_chunk`): the front end with its :class:`StreamContext`,
+the governor model and the filters F (the main one and the filter spread's, poles scaled by
+``IdentifySettings.spread_scales``) carry their states from one chunk to the next, and each
+chunk of ``update_s`` adds one block of sufficient statistics (:class:`Blocks`: X^T X, X^T z,
+z^T z, sum z and the count). The estimate of the last ``window_s`` (:func:`window_estimate`)
+is the solve of the sums over its blocks; its covariance is the Newey-West sandwich of the
+blocks' scores g_b = X_b^T z_b - X_b^T X_b theta (Bartlett weights over the
+``ceil(hac_window_s / update_s)`` neighbouring blocks that the residual's autocorrelation
+reaches), so that the interval too comes from the sums alone: no sample is stored, and the
+cost per sample does not grow with the window.
+
+Where it differs from the batch fit (each is what a causal, fixed-memory fit allows):
+
+* the governor model is driven by the speed low-passed forwards only (a 2nd-order Butterworth
+  at ``governor_smoothing_hz``: a delay of ~0.1 s at 2 Hz, far below a governor's time
+  constants; the batch fit's backward pass needs the future);
+* ordinary least squares: Huber's weights need each sample's residual against the window's
+  own solution, which sums cannot give;
+* the noise part of the interval is the sandwich (no bootstrap: refits of noise draws need the
+  window's samples); the filter spread and ``model_error`` enter as in the batch fit;
+* T_ref is the first chunk's quasi-steady state (the offset term c absorbs its error);
+* the filters start from rest at a segment's first sample, which ``settle_s`` leaves out.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from .drem import ObserverConfig
+from .front_end import StreamContext, front_end, next_context
+from .identify import (
+    Identified,
+    IdentifySettings,
+    _design_row,
+    _fit_without,
+    _result,
+    refit_spread,
+    solve_spd,
+)
+from .lti import butterworth2, filter_states, hold_discretisation, lag_chain
+from .plant import Plant
+from .recording import Recording
+from .settings import Settings
+
+
+class WindowSettings(eqx.Module):
+    """How often the windowed estimate is refreshed and over how long a window (static)."""
+
+    update_s: float = eqx.field(static=True, default=1.0)
+    """Chunk length and refresh period [s]: one block of sufficient statistics per update."""
+    window_s: float = eqx.field(static=True, default=120.0)
+    """Length of the window the estimate is fitted on [s]: the last ``window_s / update_s``
+    blocks. The first estimate of a segment comes once the window is full."""
+
+    def __check_init__(self):
+        if not (self.update_s > 0 and self.window_s >= self.update_s):
+            raise ValueError(f"need 0 < update_s <= window_s, got update_s = {self.update_s}, "
+                             f"window_s = {self.window_s}")
+
+    @property
+    def blocks(self) -> int:
+        """Blocks in one window."""
+        return max(1, round(self.window_s / self.update_s))
+
+    def chunk_samples(self, frame_rate_hz: float) -> int:
+        """Samples in one chunk at ``frame_rate_hz``."""
+        return max(1, round(self.update_s * frame_rate_hz))
+
+
+class Blocks(NamedTuple):
+    """Sufficient statistics of one chunk (leading axes: blocks, then filters where shown)."""
+
+    normal: Array
+    """X^T X [filters, 4, 4] (the main filter F first, then the spread's)."""
+    rhs: Array
+    """X^T z [filters, 4]."""
+    zz: Array
+    """z^T z [filters]."""
+    z: Array
+    """sum z [filters]."""
+    count: Array
+    """Samples that entered [-]."""
+
+
+class Carry(NamedTuple):
+    """What one chunk of a segment hands to the next."""
+
+    context: StreamContext
+    """The front end's context at the next slice's first sample."""
+    filters: Array
+    """States of the filters F [filters, 5 signals, 3] at the last own sample."""
+    signals: Array
+    """The regression's inputs at the last own sample [5]."""
+    smooth: Array
+    """State of the governor input's low-pass [2] at the last own sample."""
+    x2: Array
+    """The measured speed deviation at the last own sample [rad/s]."""
+    governor: object
+    """The governor model's state at the last own sample."""
+    dw: Array
+    """The governor's (low-passed) input at the last own sample [pu]."""
+    t_ref: Array
+    """T_ref of the segment [pu]."""
+    t_m0: Array
+    """The governor model's torque at the segment's first sample [pu]."""
+    elapsed: Array
+    """Samples of the segment processed so far."""
+
+
+def _filters(config: ObserverConfig, s: IdentifySettings, dt):
+    poles = jnp.stack([config.lambda1, config.lambda2, config.lambda3])
+    discs = [hold_discretisation(*lag_chain(k * poles), dt) for k in (1.0, *s.spread_scales)]
+    return jax.tree_util.tree_map(lambda *x: jnp.stack(x), *discs)
+
+
+def halo(settings: Settings) -> int:
+    """Samples of a chunk's slice before and after its own: the derivative window (at least 1)."""
+    return max(settings.derivative_half_width, 1)
+
+
+def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings: Settings,
+                 identify_settings: IdentifySettings, carry: Carry | None) -> tuple[Blocks, Carry]:
+    """One chunk of a stream: its block of sufficient statistics and the carry to the next.
+
+    Arguments:
+        rec: the slice: :func:`halo` samples, the chunk's own samples, :func:`halo` samples
+            (the derivative window on both sides). The next chunk's slice starts where this
+            one's own samples end, less the halo: chunk k of a segment owns samples
+            ``halo + k * size`` to ``halo + (k + 1) * size``.
+        carry: the previous chunk's; None at a segment's first chunk (T_ref, the filters and
+            the governor start there, at rest).
+
+    Pure: jit and vmap (over the units of a fleet) pass through.
+    """
+    s = identify_settings
+    m = plant.machine
+    ctx = None if carry is None else carry.context
+    fe = front_end(rec, plant, settings, ctx)
+    ts = rec.t_s
+    dt = ts[1] - ts[0]
+    lead = halo(settings)
+    size = ts.shape[0] - 2 * lead
+
+    def cut(x):
+        return jax.lax.dynamic_slice_in_dim(x, lead, size)
+
+    te, dw_raw, x2 = cut(fe.alg.t_e_pu), cut(fe.dw), cut(fe.x2_meas)
+    gov = plant.governor
+    smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
+    if carry is None:   # at rest at the segment's first own sample
+        refs = gov.reference_from_steady(te, dw_raw)
+        t_ref = jnp.mean(refs)
+        x2_prev, smooth0 = x2[0], jnp.stack([x2[0], 0.0])
+        dw_prev = x2[0] / m.omega_s
+        gov0 = gov.steady_state(t_ref, dw_prev)
+        t_m0, elapsed = gov.torque(gov0, dw_prev), jnp.zeros((), jnp.int32)
+    else:
+        t_ref, x2_prev, smooth0, dw_prev = carry.t_ref, carry.x2, carry.smooth, carry.dw
+        gov0, t_m0, elapsed = carry.governor, carry.t_m0, carry.elapsed
+    smooth = filter_states(smoothing, jnp.concatenate([x2_prev[None], x2]), x0=smooth0)
+    dw = smooth[1:, 0] / m.omega_s
+
+    def heun(x, d):   # governor_torque's step, from a carried state
+        d0, d1 = d
+        k1 = gov.vector_field(x, d0, t_ref)
+        k2 = gov.vector_field(x + dt * k1, d1, t_ref)
+        x = x + 0.5 * dt * (k1 + k2)
+        return x, (x, gov.torque(x, d1))
+
+    _, (gov_states, t_m) = jax.lax.scan(heun, gov0, (jnp.concatenate([dw_prev[None], dw[:-1]]), dw))
+    derived = rec.f_hz is None
+    bus = jnp.zeros_like(te) if derived else 2.0 * jnp.pi * (cut(fe.f_hz) - m.f_nominal_hz)
+    rotor = cut(fe.alg.delta_rad) if derived else cut(fe.alg.delta_rad - fe.theta_ref)
+    u = jnp.stack([bus, rotor, t_m - te, jnp.ones_like(te), t_m - t_m0])   # [5, size]
+    discs = _filters(config, s, dt)
+    if carry is None:
+        u_prev = u[:, 0]
+        x0 = jnp.zeros((discs[0].shape[0], 5, 3), u.dtype).at[:, :, 0].set(u_prev)
+    else:
+        u_prev, x0 = carry.signals, carry.filters
+    u_all = jnp.concatenate([u_prev[:, None], u], axis=1)
+
+    def one_filter(disc, x0_f):
+        states = jax.vmap(lambda uu, xx: filter_states(disc, uu, x0=xx)[1:])(u_all, x0_f)  # [5, size, 3]
+        row, z = _design_row(lambda signal, order: states[signal][:, order])
+        return jnp.stack(row, axis=1), z, states[:, -1]   # [5, 3] at the last own sample
+
+    designs, zs, last = jax.vmap(one_filter)(discs, x0)
+    k = elapsed + jnp.arange(size)
+    w = (k * dt >= s.settle_s).astype(u.dtype)
+    blocks = Blocks(normal=jnp.einsum("ftp,ftq,t->fpq", designs, designs, w),
+                    rhs=jnp.einsum("ftp,ft,t->fp", designs, zs, w),
+                    zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w),
+                    count=jnp.sum(w))
+    new = Carry(context=next_context(fe, ctx, size), filters=last, signals=u[:, -1],
+                smooth=smooth[-1], x2=x2[-1], governor=jax.tree_util.tree_map(lambda x: x[-1], gov_states),
+                dw=dw[-1], t_ref=t_ref, t_m0=t_m0, elapsed=elapsed + size)
+    return blocks, new
+
+
+def window_estimate(blocks: Blocks, present, plant: Plant, identify_settings: IdentifySettings,
+                    window: WindowSettings, t_ref, t_m0) -> Identified:
+    """The estimate of a window from its blocks, oldest first (``present``: [blocks] which of
+    them hold a chunk), with ``t_ref`` and ``t_m0`` of the segment (:class:`Carry`).
+
+    The same :class:`Identified` as the batch fit's, with its noise part from the blocks'
+    sandwich and ``noise_levels`` NaN (not measured on a stream). Pure: jit and vmap pass through.
+    """
+    s = identify_settings
+    w = present.astype(blocks.zz.dtype)
+    tot = jax.tree_util.tree_map(lambda x: jnp.einsum("b...,b->...", x, w), blocks)
+    thetas = jax.vmap(solve_spd)(tot.normal, tot.rhs)                    # [filters, 4]
+    theta, info = thetas[0], tot.normal[0]
+    rss = (tot.zz - 2.0 * jnp.sum(thetas * tot.rhs, axis=1)
+           + jnp.einsum("fp,fpq,fq->f", thetas, tot.normal, thetas))
+    tss = tot.zz - tot.z**2 / jnp.maximum(tot.count, 1.0)
+    explained = 1.0 - rss / jnp.maximum(tss, 1e-300)
+    g = (blocks.rhs[:, 0] - jnp.einsum("bpq,q->bp", blocks.normal[:, 0], theta)) * w[:, None]
+    lags = math.ceil(s.hac_window_s / window.update_s)
+    meat = g.T @ g
+    for lag in range(1, min(lags, window.blocks - 1) + 1):
+        cross = g[lag:].T @ g[:-lag]
+        meat = meat + (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
+    bread = solve_spd(info, jnp.eye(4, dtype=info.dtype))
+    a2_without = jnp.stack([_fit_without(info, tot.rhs[0], j)[1] for j in (0, 3)])
+    if s.spread_scales:
+        spread, fits = refit_spread(theta[1], thetas[1:, 1], explained[0], explained[1:])
+    else:
+        spread, fits = jnp.zeros((), info.dtype), jnp.zeros((), jnp.int32)
+    return _result(theta, bread @ meat @ bread, info, plant.machine.omega_s, tot.count, spread, fits,
+                   jnp.full(5, jnp.nan, info.dtype), jnp.array(False), s.model_error, t_ref, t_m0,
+                   a2_without)

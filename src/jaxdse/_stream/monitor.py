@@ -1,0 +1,609 @@
+"""``jaxdse monitor``: per-unit H and D, with their intervals, from live C37.118.2 streams.
+
+The monitor file (TOML) names the plants (``fleet``: a fleet file or a run configuration, whose
+units and measurement bases it takes) and the streams (``[[stream]]``: a PMU or a PDC each,
+over TCP or UDP). One thread per stream connects, asks for the configuration (CFG-2), turns
+data on and decodes; it reconnects with back-off (0.5 s doubling to 10 s) when the connection
+drops or stays silent, so one stream's failure costs its units only. The main thread:
+
+* places each data frame on the reporting grid by its timestamp (:func:`~.c37118.grid_index`;
+  off-grid frames are dropped and counted), holds frames ``reorder_s`` in a reorder buffer and
+  releases them in grid order (a frame later than that, or a repeat, is dropped and counted);
+* maps each unit to its station (by name, or ``[stream.stations]``), converts its V1 and I1
+  to per unit with the unit's own measurement bases (:func:`~.pmu_sim.served_units`) and
+  screens it: a STAT data error (bits 15-14), lost sync (bit 13), NaN or a value outside the
+  file readers' physical ranges makes the sample unusable;
+* feeds the units' samples to :class:`~.online.OnlineGroup` (bridging short gaps, restarting a
+  unit's estimator after a long one) and writes each update as a line of ``updates.jsonl``;
+* on a new configuration (CFGCNT or the layout changed, STAT bit 10's announcement done), re-maps
+  the stations and restarts that stream's estimators, and says so;
+* records every released frame as the monitor used it to ``recording_<k>.csv`` (per unit: V
+  and I in pu and rad, f, STAT, NaN where unusable) with ``replay.toml``, which ``jaxdse run``
+  reads back through the file readers and the same windowed identification: its last update
+  equals the live one;
+* raises an alarm when a unit's identified H falls below ``[alarm] h_below_s`` and clears it
+  when H rises above that by ``hysteresis`` (a fraction), in the log and in ``updates.jsonl``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import queue
+import sys
+import threading
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import jax.tree_util as jtu
+import numpy as np
+
+from .._io.errors import InputError
+from .._io.measurement import MAX_CURRENT_SAMPLE_PU_MACHINE, VOLTAGE_RANGE_PU
+from .._io.schema import no_unknown, read_toml, subtable, typed_value
+from . import c37118 as c3
+from .online import OnlineGroup, Update
+from .pmu_sim import PmuClient, _short_names, served_units, source_units
+
+MAX_BACKOFF_S = 10.0
+FREQUENCY_RANGE_HZ = 5.0
+"""A frequency this far from nominal is no measurement (the readers' ``MAX_FREQUENCY_SAMPLE_OFFSET_HZ``)."""
+MAX_PENDING_FRAMES = 4096
+"""Frames the reorder buffer holds at most (its ``reorder_s`` covers far fewer)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class StreamSpec:
+    """One [[stream]] of the monitor file."""
+
+    host: str = "127.0.0.1"
+    port: int = c3.TCP_PORT
+    idcode: int = 1
+    protocol: str = "c37.118"
+    transport: str = "tcp"
+    reorder_s: float = 0.2
+    """Frames are held this long [s of stream time] for late ones before they are used."""
+    timeout_s: float = 5.0
+    """A connection silent this long [s] is dropped and made again."""
+    current_direction: str = "out_of_plant"
+    """The direction of the streamed current I1: out of the plant (generator convention, as
+    ``jaxdse pmu-sim`` serves it) or into it."""
+    stations: tuple[tuple[str, str], ...] = ()
+    """(unit, station name) pairs; units not named are found by their name's first 16 characters."""
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitorUnit:
+    name: str
+    run: object
+    """The unit's :class:`~jaxdse._io.config.GeneratorRun` (plant, measurement spec)."""
+    stream: int
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitorConfig:
+    path: Path
+    source: Path
+    streams: tuple[StreamSpec, ...]
+    units: tuple[MonitorUnit, ...]
+    update_s: float = 1.0
+    window_s: float = 120.0
+    h_below_s: float | None = None
+    hysteresis: float = 0.05
+    notes: tuple[str, ...] = ()
+
+
+STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
+TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm"}
+
+
+def load_monitor(path) -> MonitorConfig:
+    """Read and check a monitor file (see ``MONITOR_HELP`` in the CLI)."""
+    path = Path(path)
+    data = read_toml(path)
+    no_unknown(path, data, TOP_KEYS, "")
+    if "fleet" not in data:
+        raise InputError(path, "no fleet: name the fleet file or run configuration of the plants, "
+                         'e.g. fleet = "fleet.toml"', key="fleet")
+    source = (path.parent / typed_value(path, str, data["fleet"], "fleet")).resolve()
+    update_s = typed_value(path, float, data.get("update_s", 1.0), "update_s", 1e-3)
+    window_s = typed_value(path, float, data.get("window_s", 120.0), "window_s", 1e-3)
+    if window_s < update_s:
+        raise InputError(path, f"window_s = {window_s} is shorter than update_s = {update_s}", key="window_s")
+    alarm = subtable(path, data, "alarm", "alarm")
+    no_unknown(path, alarm, {"h_below_s", "hysteresis"}, "alarm.")
+    tables = data.get("stream", [{}])
+    if isinstance(tables, dict):
+        tables = [tables]
+    runs, skipped = source_units(source)[:2]
+    names = [n for n, _ in runs]
+    streams, owner = [], {}
+    for k, t in enumerate(tables):
+        key = f"stream[{k}]." if len(tables) > 1 else "stream."
+        no_unknown(path, t, STREAM_KEYS, key)
+        kw = {}
+        for f in dataclasses.fields(StreamSpec):
+            if f.name in t and f.name != "stations":
+                kw[f.name] = typed_value(path, type(f.default), t[f.name], key + f.name,
+                                         0 if isinstance(f.default, (int, float)) else None)
+        if kw.get("protocol", "c37.118") not in ("c37.118", "sttp"):
+            raise InputError(path, f"must be \"c37.118\" or \"sttp\", got {kw['protocol']!r}", key=key + "protocol")
+        if kw.get("protocol") == "sttp":
+            raise InputError(path, "STTP (IEEE 2664) is not available in this version: use "
+                             'protocol = "c37.118"', key=key + "protocol")
+        if kw.get("transport", "tcp") not in ("tcp", "udp"):
+            raise InputError(path, f"must be \"tcp\" or \"udp\", got {kw['transport']!r}", key=key + "transport")
+        if kw.get("current_direction", "out_of_plant") not in ("out_of_plant", "into_plant"):
+            raise InputError(path, "must be \"out_of_plant\" or \"into_plant\"", key=key + "current_direction")
+        stations = subtable(path, t, "stations", key + "stations")
+        for unit in stations:
+            if unit not in names:
+                raise InputError(path, f"no unit {unit!r} in {source.name}", key=key + "stations." + unit)
+        kw["stations"] = tuple((u, str(s)) for u, s in stations.items())
+        listed = t.get("units", names if len(tables) == 1 else [])
+        for unit in listed:
+            if unit not in names:
+                raise InputError(path, f"no unit {unit!r} in {source.name}", key=key + "units")
+            owner.setdefault(unit, k)
+        streams.append(StreamSpec(**kw))
+    units = tuple(MonitorUnit(n, g, owner[n]) for n, g in runs if n in owner)
+    notes = tuple(f"{n}: not monitored ({why})" for n, why in skipped) + tuple(
+        f"{n}: in no [[stream]]'s units" for n in names if n not in owner)
+    if not units:
+        raise InputError(path, "no unit to monitor")
+    return MonitorConfig(path, source, tuple(streams), units, update_s, window_s,
+                         typed_value(path, float, alarm["h_below_s"], "alarm.h_below_s", 0)
+                         if "h_below_s" in alarm else None,
+                         typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes)
+
+
+# --- the connections -------------------------------------------------------------------------
+
+def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log):
+    """One stream's thread: connect, ask for the configuration, read; reconnect with back-off."""
+    backoff = 0.5
+    while not stop.is_set():
+        try:
+            with PmuClient(spec.host, spec.port, spec.idcode, timeout=spec.timeout_s,
+                           udp=spec.transport == "udp") as pmu:
+                out.put((k, "frame", pmu.config(c3.CFG2)))
+                pmu.start()
+                out.put((k, "up", f"{spec.host}:{spec.port}"))
+                backoff, last = 0.5, time.monotonic()
+                while not stop.is_set():
+                    frames = pmu.poll(0.2)
+                    now = time.monotonic()
+                    if frames:
+                        last = now
+                    elif now - last > spec.timeout_s:
+                        raise TimeoutError(f"no frame for {spec.timeout_s:g} s")
+                    for frame in frames:
+                        if isinstance(frame, (c3.ConfigFrame, c3.DataFrame)):
+                            out.put((k, "frame", frame))
+                    out.put((k, "counts", dict(pmu.decoder.counts)))
+                try:
+                    pmu.stop()
+                except OSError:
+                    pass
+        except (OSError, ConnectionError, TimeoutError) as err:
+            if stop.is_set():
+                break
+            out.put((k, "down", f"{err}"))
+            log(f"stream {k} ({spec.host}:{spec.port}): {err or type(err).__name__}; reconnecting in "
+                f"{backoff:g} s")
+            stop.wait(backoff)
+            backoff = min(2 * backoff, MAX_BACKOFF_S)
+
+
+# --- the units' estimators ---------------------------------------------------------------------
+
+def unit_groups(units) -> list[list[int]]:
+    """Indices of ``units`` (:class:`MonitorUnit`) by plant structure and PMU location: one
+    :class:`OnlineGroup` (one vmapped program) each."""
+    groups = defaultdict(list)
+    for j, u in enumerate(units):
+        groups[(jtu.tree_structure(u.run.plant), u.run.measurement.location)].append(j)
+    return list(groups.values())
+
+
+def make_groups(units, rate: float, cfg: MonitorConfig, est) -> list[tuple[OnlineGroup, np.ndarray]]:
+    """The :class:`OnlineGroup` of each group of ``units`` and the units' indices in it."""
+    from .._core.windowed import WindowSettings
+
+    window = WindowSettings(update_s=cfg.update_s, window_s=cfg.window_s)
+    out = []
+    for idx in unit_groups(units):
+        us = [units[j] for j in idx]
+        out.append((OnlineGroup([u.name for u in us], [u.run.plant for u in us],
+                                [u.run.measurement.location for u in us], rate, window, est.observer,
+                                est.settings, est.identify, est.verdict,
+                                max_gap_s=min(u.run.measurement.max_gap_s for u in us)), np.asarray(idx)))
+    return out
+
+
+def screen(v, i, f, stat, specs_scale, f_nominal):
+    """Per-unit pu samples -> (v, i, f, usable): STAT data error or lost sync (the readers'
+    ``STAT_INVALID_BITS``), NaN, |V| or |I| outside the readers' physical ranges make a sample
+    unusable; a frequency outside them is dropped (NaN: derived from the angle)."""
+    vm, im = np.abs(v), np.abs(i)
+    usable = ((np.asarray(stat, np.int64) & 0xE000) == 0) & np.isfinite(v) & np.isfinite(i) \
+        & (vm >= VOLTAGE_RANGE_PU[0]) & (vm <= VOLTAGE_RANGE_PU[1]) \
+        & ~(im * specs_scale > MAX_CURRENT_SAMPLE_PU_MACHINE)
+    f = np.where(np.abs(f - f_nominal) <= FREQUENCY_RANGE_HZ, f, np.nan)
+    return v, i, f, usable
+
+
+def _layout(cfg: c3.ConfigFrame):
+    """What a configuration change alters: rate, time base, stations, their channels and formats."""
+    return (cfg.data_rate, cfg.time_base, tuple((s.name, s.idcode, s.cfgcnt, s.format, len(s.phasors))
+                                                for s in cfg.stations))
+
+
+COLUMNS = ("VM", "VA", "IM", "IA", "F", "STAT")
+"""A unit's columns in a recording: |V| [pu], angle V [rad], |I| [pu], angle I [rad], f [Hz], STAT."""
+
+
+class _Stream:
+    """One stream's configuration, reorder buffer, estimators and recording."""
+
+    def __init__(self, k: int, spec: StreamSpec, units: list[MonitorUnit], all_names: list[str],
+                 cfg: MonitorConfig, est, out_dir: Path | None, log):
+        self.k, self.spec, self.units, self.cfg, self.est, self.log = k, spec, units, cfg, est, log
+        self.out_dir = out_dir
+        short = dict(zip(all_names, _short_names(all_names)))
+        named = dict(spec.stations)
+        self.wanted = [(named.get(u.name), u.name, short[u.name]) for u in units]
+        scale = [served_units(u.run.measurement)[:2] for u in units]
+        self.v_per_pu = np.array([s[0] for s in scale])
+        self.i_per_pu = np.array([s[1] for s in scale]) * (-1.0 if spec.current_direction == "into_plant" else 1.0)
+        self.machine_scale = np.array([u.run.measurement.s_base_mva / float(u.run.plant.machine.s_rated_mva)
+                                       for u in units])
+        self.f_nominal = np.array([float(u.run.measurement.f_nominal_hz) for u in units])
+        self.config = None
+        self.groups = []
+        self.pos = np.full(len(units), -1)
+        self.heap, self.held = [], set()
+        self.released = None
+        self.newest = None
+        self.parts = []
+        self.file = None
+        self.counts = defaultdict(int)
+        self.decoder_counts = {}
+        self.unusable = np.zeros(len(units), np.int64)
+
+    # configuration
+    def on_config(self, frame: c3.ConfigFrame) -> list[Update]:
+        if self.config is not None and _layout(frame) == _layout(self.config):
+            return []
+        out = self.release(everything=True) if self.config is not None else []
+        old = self.config
+        self.config = frame
+        names = [s.name for s in frame.stations]
+        self.pos = np.full(len(self.units), -1)
+        missing = []
+        for j, (given, full, short) in enumerate(self.wanted):
+            for cand in (given,) if given else (full, short):
+                if cand in names:
+                    self.pos[j] = names.index(cand)
+                    break
+            else:
+                missing.append(full)
+        self.rate = frame.rate_hz
+        self.reorder = max(0, math.ceil(self.spec.reorder_s * self.rate - 1e-9))
+        self.groups = make_groups(self.units, self.rate, self.cfg, self.est)
+        self.heap, self.held, self.released, self.newest = [], set(), None, None
+        self._new_part()
+        mapped = int((self.pos >= 0).sum())
+        if old is None:
+            self.log(f"stream {self.k}: {len(names)} station(s) at {self.rate:g} frames/s; {mapped} of "
+                     f"{len(self.units)} unit(s) mapped")
+        else:
+            self.counts["config_changes"] += 1
+            self.log(f"stream {self.k}: the configuration changed (CFGCNT {old.stations[0].cfgcnt} -> "
+                     f"{frame.stations[0].cfgcnt}): stations re-mapped ({mapped} unit(s)), their estimators "
+                     "restarted")
+        if missing:
+            self.log(f"stream {self.k}: no station for {', '.join(missing)} (not estimated)")
+        return out
+
+    def _new_part(self):
+        if self.file is not None:
+            self.file.close()
+        self.file = None
+        if self.out_dir is None:
+            return
+        name = f"recording_{self.k}_{len(self.parts) + 1}.csv"
+        self.parts.append({"file": name, "stream": self.k, "frame_rate_hz": self.rate, "index0": None,
+                           "units": [u.name for u in self.units]})
+        self.file = open(self.out_dir / name, "w")
+        self.file.write(",".join(["time_s"] + [f"{u.name}/{c}" for u in self.units for c in COLUMNS]) + "\n")
+
+    # data
+    def on_data(self, frame: c3.DataFrame) -> list[Update]:
+        if self.config is None:
+            self.counts["before_config"] += 1
+            return []
+        self.counts["frames"] += 1
+        idx = c3.grid_index(frame.soc, frame.fracsec, self.config.time_base, self.config.data_rate)
+        if idx is None:
+            self.counts["off_grid"] += 1
+            return []
+        if (self.released is not None and idx <= self.released) or idx in self.held:
+            self.counts["late_or_repeated"] += 1
+            return []
+        if len(self.held) >= MAX_PENDING_FRAMES:
+            self.counts["reorder_overflow"] += 1
+            return []
+        import heapq
+
+        heapq.heappush(self.heap, (idx, id(frame), frame))
+        self.held.add(idx)
+        self.newest = idx if self.newest is None else max(self.newest, idx)
+        return self.release()
+
+    def release(self, everything: bool = False) -> list[Update]:
+        import heapq
+
+        out = []
+        while self.heap and (everything or self.heap[0][0] <= self.newest - self.reorder):
+            idx, _, frame = heapq.heappop(self.heap)
+            self.held.discard(idx)
+            if self.released is not None and idx > self.released + 1:
+                self.counts["missing_frames"] += idx - self.released - 1
+            self.released = idx
+            out += self._use(idx, frame)
+        return out
+
+    def _use(self, idx: int, frame: c3.DataFrame) -> list[Update]:
+        a = frame.arrays
+        ph = a.phasors if isinstance(a.phasors, np.ndarray) else np.array(
+            [np.concatenate([p[:2], np.full(max(0, 2 - len(p)), np.nan)]) for p in a.phasors])
+        n = len(self.units)
+        ok = self.pos >= 0
+        p = np.where(ok, self.pos, 0)
+        v = np.where(ok, ph[p, 0], np.nan) / self.v_per_pu
+        i = np.where(ok, ph[p, 1], np.nan) / self.i_per_pu
+        stat = np.where(ok, np.asarray(a.stat)[p], 0xFFFF)
+        v, i, f, usable = screen(v, i, np.where(ok, np.asarray(a.freq, float)[p], np.nan), stat,
+                                 self.machine_scale, self.f_nominal)
+        self.unusable += ~usable & ok
+        vm, va, im, ia = np.abs(v), np.angle(v), np.abs(i), np.angle(i)
+        if self.file is not None:
+            part = self.parts[-1]
+            if part["index0"] is None:
+                part["index0"] = idx
+            cols = np.stack([vm, va, im, ia, f, stat.astype(float)], axis=1)
+            cols[~usable, :5] = np.nan
+            self.file.write(repr((idx - part["index0"]) / self.rate) + ","
+                            + ",".join(_text(x) for x in cols.reshape(n * len(COLUMNS))) + "\n")
+        out = []
+        for group, members in self.groups:
+            out += group.push(idx, vm[members], va[members], im[members], ia[members], f[members], usable[members])
+        return out
+
+    def close(self):
+        if self.file is not None:
+            self.file.close()
+            self.file = None
+
+
+def _text(x: float) -> str:
+    return "" if not math.isfinite(x) else (str(int(x)) if x == int(x) and abs(x) < 1e15 else repr(float(x)))
+
+
+def update_line(u: Update, alarm: bool, delay_s: float | None = None) -> dict:
+    """One line of ``updates.jsonl``."""
+    line = {"t": u.t, "unit": u.unit, "H_s": u.h_s, "H_ci95": u.h_ci95, "D": u.d_pu_s, "D_ci95": u.d_ci95,
+            "verdict": u.verdict, "reasons": list(u.reasons), "age_s": u.age_s, "last_H_s": u.last_h_s,
+            "segment": u.segment, "window_s": u.window_s, "samples": u.samples, "alarm": alarm}
+    if delay_s is not None:
+        line["delay_s"] = round(delay_s, 6)
+    return line
+
+
+class Monitor:
+    """The monitor of :func:`load_monitor`'s configuration (see the module docstring)."""
+
+    def __init__(self, cfg: MonitorConfig, out_dir: Path | None = None, log=None, console=None):
+        self.cfg = cfg
+        self.out_dir = None if out_dir is None else Path(out_dir)
+        if self.out_dir is not None:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+        self.log = log or (lambda line: print(f"jaxdse monitor: {line}", file=sys.stderr, flush=True))
+        self.console = console
+        self.est = source_units(cfg.source)
+        names = [n for n, _ in self.est.runs]
+        self.streams = [_Stream(k, spec, [u for u in cfg.units if u.stream == k], names, cfg, self.est,
+                                self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
+        self.alarms = {}
+        self.updates = 0
+        self.latest = {}
+        self.delays = []
+        self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
+        self._next_report = None
+
+    def emit(self, updates: list[Update]):
+        now = time.time()
+        for u in updates:
+            alarm = self._alarm(u)
+            delay = now - u.t
+            self.delays.append(delay)
+            self.updates += 1
+            self.latest[u.unit] = u
+            if self._jsonl is not None:
+                self._jsonl.write(json.dumps(update_line(u, alarm, delay)) + "\n")
+        if updates and self._jsonl is not None:
+            self._jsonl.flush()
+        if updates:
+            self._report(max(u.t for u in updates))
+
+    def _alarm(self, u: Update) -> bool:
+        on = self.alarms.get(u.unit, False)
+        limit = self.cfg.h_below_s
+        if limit is None or u.h_s is None:
+            return on
+        if not on and u.h_s < limit:
+            on = True
+            self.log(f"ALARM {u.unit}: H {u.h_s:.3g} s (95 % {u.h_ci95[0]:.3g}-{u.h_ci95[1]:.3g}) below "
+                     f"{limit:g} s at {_utc(u.t)}")
+        elif on and u.h_s > limit * (1.0 + self.cfg.hysteresis):
+            on = False
+            self.log(f"alarm cleared {u.unit}: H {u.h_s:.3g} s at {_utc(u.t)}")
+        self.alarms[u.unit] = on
+        return on
+
+    def _report(self, t: float):
+        every = max(self.cfg.update_s, 10.0)
+        if self._next_report is not None and t < self._next_report:
+            return
+        self._next_report = (math.floor(t / every) + 1) * every
+        words = defaultdict(int)
+        for u in self.latest.values():
+            words[u.verdict] += 1
+        hs = [u.h_s for u in self.latest.values() if u.h_s is not None]
+        dropped = sum(s.counts["missing_frames"] + s.counts["late_or_repeated"] for s in self.streams)
+        line = (f"{_utc(t)}: {len(self.latest)} unit(s): " + ", ".join(f"{k} {v}" for k, v in sorted(words.items()))
+                + (f"; median H {np.median(hs):.3g} s" if hs else "") + f"; frames missing or late {dropped}")
+        (self.console or self.log)(line)
+
+    def run(self, duration_s: float | None = None) -> dict:
+        """Monitor until ``duration_s`` seconds pass (None: until interrupted); returns the summary."""
+        q: queue.Queue = queue.Queue(maxsize=100_000)
+        stop = threading.Event()
+        threads = [threading.Thread(target=_reader, args=(k, s.spec, q, stop, self.log), daemon=True,
+                                    name=f"jaxdse-stream-{k}") for k, s in enumerate(self.streams)]
+        for t in threads:
+            t.start()
+        t0 = time.monotonic()
+        try:
+            while duration_s is None or time.monotonic() - t0 < duration_s:
+                try:
+                    item = q.get(timeout=0.05)
+                except queue.Empty:
+                    continue
+                self._handle(item)
+        except KeyboardInterrupt:
+            self.log("interrupted")
+        finally:
+            stop.set()
+            for t in threads:
+                t.join(timeout=2.0)
+            while True:    # what was received before the stop is used and recorded
+                try:
+                    self._handle(q.get_nowait())
+                except queue.Empty:
+                    break
+            for s in self.streams:
+                self.emit(s.release(everything=True))
+                s.close()
+            if self._jsonl is not None:
+                self._jsonl.close()
+        return self._finish(time.monotonic() - t0)
+
+    def _handle(self, item):
+        k, kind, x = item
+        s = self.streams[k]
+        if kind == "frame":
+            self.emit(s.on_config(x) if isinstance(x, c3.ConfigFrame) else s.on_data(x))
+        elif kind == "counts":
+            s.decoder_counts = x
+        elif kind == "down":
+            s.counts["disconnects"] += 1
+        elif kind == "up" and s.counts["disconnects"]:
+            self.log(f"stream {k}: reconnected to {x}")
+
+    def _finish(self, wall_s: float) -> dict:
+        d = np.asarray(self.delays)
+        summary = {
+            "wall_s": round(wall_s, 3), "updates": self.updates,
+            "delay_s": None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99))},
+            "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts),
+                         "decoder_rejected": {k: v for k, v in s.decoder_counts.items() if v},
+                         "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n}}
+                        for s in self.streams],
+            "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
+            "notes": list(self.cfg.notes),
+        }
+        if self.out_dir is not None:
+            parts = [p for s in self.streams for p in s.parts if p["index0"] is not None]
+            (self.out_dir / "replay.toml").write_text(replay_toml(self.cfg, parts))
+            (self.out_dir / "monitor.json").write_text(json.dumps(summary, indent=1))
+        return summary
+
+
+def _utc(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(t)) + f".{int(round((t % 1) * 1000)) % 1000:03d} UTC"
+
+
+# --- the recording, read back --------------------------------------------------------------------
+
+def replay_toml(cfg: MonitorConfig, parts: list[dict]) -> str:
+    """The file that ``jaxdse run`` reads to replay the recorded stream."""
+    lines = ["# The stream as the monitor used it; replay it with", "#   jaxdse run replay.toml --out DIR",
+             "# (the same windowed identification, from the file readers: its updates.jsonl equals the "
+             "live one's)", "", "[replay]", f"monitor = {json.dumps(str(cfg.path))}", ""]
+    for p in parts:
+        lines += ["[[replay.part]]", f"file = {json.dumps(p['file'])}", f"stream = {p['stream']}",
+                  f"frame_rate_hz = {p['frame_rate_hz']!r}", f"index0 = {p['index0']}",
+                  f"units = {json.dumps(p['units'])}", ""]
+    return "\n".join(lines)
+
+
+def replay_recording(path, out_dir: Path | None = None, log=None) -> list[dict]:
+    """``jaxdse run REPLAY.toml``: the recorded stream through the file readers and the same
+    windowed identification; writes ``updates.jsonl`` to ``out_dir`` and returns its lines."""
+    from .._io.measurement import read_measurement
+
+    path = Path(path)
+    data = read_toml(path)
+    rp = subtable(path, data, "replay", "replay")
+    cfg = load_monitor(Path(rp["monitor"]))
+    est = source_units(cfg.source)
+    by_name = {u.name: u for u in cfg.units}
+    lines = []
+    for k, part in enumerate(rp.get("part", [])):
+        units = [by_name[n] for n in part["units"]]
+        rate = float(part["frame_rate_hz"])
+        series = []
+        for u in units:
+            spec = dataclasses.replace(
+                u.run.measurement, file=(str(path.parent / part["file"]),), format="csv",
+                columns={"time": "time_s", "v_mag": f"{u.name}/VM", "v_ang": f"{u.name}/VA",
+                         "i_mag": f"{u.name}/IM", "i_ang": f"{u.name}/IA", "frequency": f"{u.name}/F",
+                         "stat": f"{u.name}/STAT"},
+                voltage_unit="pu", current_unit="pu", angle_unit="rad", time_unit="s", time_format=None,
+                timezone=None, frequency_unit="Hz", frequency_kind="absolute", v_base_kv=None,
+                current_direction="out_of_plant", frame_rate_hz=rate, on_long_gap="split",
+                min_segment_s=0.0, csv_options=dataclasses.replace(u.run.measurement.csv_options, delimiter=","))
+            try:
+                segments, _ = read_measurement(spec, u.run.plant.machine)
+            except InputError as err:
+                (log or print)(f"{u.name}: not replayed ({err})")
+                segments = []
+            series.append([(int(part["index0"]) + round(t0 * rate), r) for t0, r in segments])
+        starts = [i0 for s in series for i0, _ in s]
+        if not starts:
+            continue
+        lo = min(starts)
+        hi = max(i0 + int(np.shape(r.t_s)[0]) for s in series for i0, r in s)
+        table = np.full((5, len(units), hi - lo), np.nan)
+        usable = np.zeros((len(units), hi - lo), bool)
+        for j, s in enumerate(series):
+            for i0, r in s:
+                sl = slice(i0 - lo, i0 - lo + int(np.shape(r.t_s)[0]))
+                f = np.full(np.shape(r.t_s), np.nan) if r.f_hz is None else np.asarray(r.f_hz)
+                table[:, j, sl] = [np.asarray(r.v_mag_pu), np.asarray(r.v_ang_rad), np.asarray(r.i_mag_pu),
+                                   np.asarray(r.i_ang_rad), f]
+                usable[j, sl] = True
+        groups = make_groups(units, rate, cfg, est)
+        for c in range(hi - lo):
+            for group, members in groups:
+                for u in group.push(lo + c, *table[:, members, c], usable[members, c]):
+                    lines.append(update_line(u, False))
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        out_dir.mkdir(parents=True, exist_ok=True)
+        (out_dir / "updates.jsonl").write_text("".join(json.dumps(x) + "\n" for x in lines))
+    return lines

@@ -1,0 +1,290 @@
+"""Per-unit windowed identification of a live stream, on the host: frames in, updates out.
+
+:class:`OnlineGroup` holds the units of one plant structure that report at one frame rate
+(every unit of a fleet on one concentrator, or a part of it). Frames are pushed in grid order
+(the monitor's reorder buffer sees to that), each with every unit's phasors in per unit, its
+frequency and whether the unit's sample is usable (STAT and NaN screened by the caller). Per
+unit, as the file readers do (``jaxdse._io.measurement``):
+
+* a run of unusable or missing frames up to ``max_gap_s`` is bridged, once the next usable
+  sample arrives, by linear interpolation of the magnitudes, the unwrapped angles and the
+  frequency; a longer one ends the segment, and the unit's estimator restarts at the next
+  usable sample (``Update.segment`` counts them);
+* chunks of ``update_s`` start on the reporting grid (grid index a multiple of the chunk's
+  samples), so that every unit of the group is ready at the same frame and one vmapped call
+  (:func:`jaxdse._core.windowed.window_chunk`) serves them all; a restarted unit waits for the
+  next chunk boundary.
+
+After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
+intervals and the verdict of the window). Three compiled programs per group: a segment's first
+chunk, the chunks after it, and the window estimate.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._core.drem import ObserverConfig
+from .._core.identify import IdentifySettings
+from .._core.plant import Plant
+from .._core.recording import Recording
+from .._core.settings import Settings
+from .._core.verdict import VERDICTS, VerdictSettings, describe, verdict
+from .._core.windowed import Blocks, WindowSettings, halo, window_chunk, window_estimate
+from .._many.batch import stack
+
+WORDS = {"identified": "identified", "weakly identified": "weakly identified",
+         "not identified": "not excited", "failed": "failed"}
+"""The verdict of a window in the monitor's words: a window whose interval of H is too wide
+to name a value did not excite H (ambient data), and gets no number."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Update:
+    """One unit's windowed estimate, at the end of a chunk."""
+
+    t: float
+    """Timestamp of the window's last sample [s since 1970]."""
+    unit: str
+    h_s: float | None
+    """H [s]; None unless the window identifies it (``verdict`` identified or weakly)."""
+    h_ci95: tuple[float, float] | None
+    d_pu_s: float | None
+    """D [pu torque per rad/s]; None with H."""
+    d_ci95: tuple[float, float] | None
+    verdict: str
+    """identified, weakly identified, not excited or failed."""
+    reasons: tuple[str, ...]
+    age_s: float | None
+    """Seconds since the last window that identified H ended (0 for this one; None: none yet)."""
+    last_h_s: float | None
+    """The H of that window [s]."""
+    segment: int
+    """Segments of this unit so far (a long gap starts a new one, and a new estimator)."""
+    window_s: float
+    samples: int
+
+    def json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@eqx.filter_jit
+def _first(recs, plants, config, settings, ident):
+    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None))(recs, plants)
+
+
+@eqx.filter_jit
+def _next(recs, plants, carries, config, settings, ident):
+    return jax.vmap(lambda r, p, c: window_chunk(r, p, config, settings, ident, c))(recs, plants, carries)
+
+
+@eqx.filter_jit
+def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict_settings):
+    """Push each ready unit's block into its ring; the window estimate and verdict of every unit."""
+    n = window.blocks
+    pos = filled % n
+    units = jnp.arange(filled.shape[0])
+    ring = jax.tree_util.tree_map(
+        lambda r, b: r.at[units, pos].set(jnp.where(ready.reshape((-1,) + (1,) * (b.ndim - 1)), b, r[units, pos])),
+        ring, blocks)
+    filled = filled + ready.astype(filled.dtype)
+    order = (filled[:, None] + jnp.arange(n)[None, :]) % n          # oldest first once full
+    ordered = jax.tree_util.tree_map(lambda r: jnp.take_along_axis(
+        r, order.reshape(order.shape + (1,) * (r.ndim - 2)), axis=1), ring)
+    present = jnp.arange(n)[None, :] >= n - jnp.minimum(filled, n)[:, None]
+
+    def one(b, p, plant, c):
+        ident_ = window_estimate(b, p, plant, ident, window, c.t_ref, c.t_m0)
+        return ident_, verdict(None, ident_, None, verdict_settings)
+
+    idents, verdicts = jax.vmap(one)(ordered, present, plants, carries)
+    return ring, filled, idents, verdicts
+
+
+class OnlineGroup:
+    """The windowed identification of units of one plant structure at one frame rate."""
+
+    def __init__(self, names: Sequence[str], plants: Sequence[Plant], locations: Sequence[str],
+                 frame_rate_hz: float, window: WindowSettings = WindowSettings(),
+                 config: ObserverConfig = ObserverConfig(), settings: Settings = Settings(),
+                 identify_settings: IdentifySettings = IdentifySettings(),
+                 verdict_settings: VerdictSettings = VerdictSettings(), max_gap_s: float = 0.5,
+                 with_frequency: bool = True):
+        if len({str(loc) for loc in locations}) != 1:
+            raise ValueError("OnlineGroup: one PMU location per group")
+        self.names = list(names)
+        self.u = len(self.names)
+        self.plants = stack(list(plants))
+        self.location = locations[0]
+        self.rate = float(frame_rate_hz)
+        self.dt = 1.0 / self.rate
+        self.window, self.config, self.settings = window, config, settings
+        self.ident, self.verdict_settings = identify_settings, verdict_settings
+        self.size = window.chunk_samples(self.rate)
+        self.halo = halo(settings)
+        self.max_gap = int(math.floor(max_gap_s * self.rate + 1e-6))
+        self.with_frequency = with_frequency
+        span = self.size + 2 * self.halo
+        self.capacity = span + self.size + self.max_gap + 2
+        self.buf = np.full((5, self.u, self.capacity), np.nan)
+        self.base = None                 # grid index of buffer column 0
+        self.last_valid = np.full(self.u, -1, np.int64)   # grid index of each unit's last usable sample
+        self.slice_start = np.full(self.u, -1, np.int64)  # grid index of the next slice (-1: none yet)
+        self.seg_start = np.full(self.u, -1, np.int64)
+        self.segment = np.zeros(self.u, np.int64)
+        self.started = np.zeros(self.u, bool)             # the segment's first chunk is done
+        self.carries = None
+        self.ring = None
+        self.filled = jnp.zeros(self.u, jnp.int32)
+        self.last_h = [None] * self.u
+        self.last_h_t = [None] * self.u
+
+    # --- samples ---------------------------------------------------------------------------
+
+    def push(self, index: int, v_mag, v_ang, i_mag, i_ang, f_hz, usable) -> list[Update]:
+        """One frame at grid ``index`` (increasing): per unit [U] arrays in pu, rad and Hz, and
+        whether its sample is usable. Returns the updates of the chunks it completes."""
+        if self.base is None:
+            self.base = index
+        self._make_room(index)
+        col = index - self.base
+        values = np.stack([np.asarray(v_mag, float), np.asarray(v_ang, float), np.asarray(i_mag, float),
+                           np.asarray(i_ang, float), np.asarray(f_hz, float)])
+        usable = np.asarray(usable, bool) & np.all(np.isfinite(values[:4]), axis=0)
+        self.buf[:, :, col] = np.where(usable[None], values, np.nan)
+        gap = index - self.last_valid - 1
+        bridge = usable & (self.last_valid >= 0) & (gap > 0) & (gap <= self.max_gap)
+        for u in np.flatnonzero(bridge):
+            self._bridge(u, self.last_valid[u] - self.base, col)
+        restart = usable & ((self.last_valid < 0) | (gap > self.max_gap))
+        for u in np.flatnonzero(restart):
+            self._restart(u, index)
+        self.last_valid = np.where(usable, index, self.last_valid)
+        return self._chunks()
+
+    def _make_room(self, index: int):
+        col = index - self.base
+        if col < self.capacity:
+            return
+        # Units in a gap longer than max_gap restart at their next sample: their slices are void.
+        live = (self.slice_start >= 0) & (self.last_valid >= index - self.max_gap - 1)
+        keep_from = min([index - self.max_gap - 1, *self.slice_start[live].tolist()])
+        shift = keep_from - self.base
+        if shift <= 0 or index - keep_from >= self.capacity:
+            raise RuntimeError("OnlineGroup: buffer too small")   # not reached: capacity covers a slice
+        self.buf = np.roll(self.buf, -shift, axis=2)
+        self.buf[:, :, -shift:] = np.nan
+        self.base += shift
+
+    def _bridge(self, u: int, a: int, b: int):
+        """Linear interpolation of unit ``u`` between its usable columns a and b."""
+        w = (np.arange(a + 1, b) - a) / (b - a)
+        x = self.buf[:, u]
+        for ch in range(5):
+            lo, hi = x[ch, a], x[ch, b]
+            if ch in (1, 3):    # angles: b's within pi of a's
+                hi = lo + math.remainder(hi - lo, 2.0 * math.pi)
+            x[ch, a + 1:b] = lo + (hi - lo) * w
+
+    def _restart(self, u: int, index: int):
+        """A new segment for unit ``u`` from grid ``index``: its first slice starts at the next
+        chunk boundary of the grid."""
+        self.segment[u] += 1
+        self.seg_start[u] = index
+        self.slice_start[u] = -(-index // self.size) * self.size
+        self.started[u] = False
+        self.filled = self.filled.at[u].set(0)
+
+    # --- chunks ------------------------------------------------------------------------------
+
+    def _slices(self, units):
+        span = self.size + 2 * self.halo
+        cols = (self.slice_start[units] - self.base)[:, None] + np.arange(span)[None, :]
+        x = self.buf[:, units[:, None], cols]                     # [5, k, span]
+        t = np.arange(span) * self.dt
+        f = x[4] if self.with_frequency else None
+        return Recording(t_s=np.broadcast_to(t, x.shape[1:]).copy(), v_mag_pu=x[0], v_ang_rad=x[1],
+                         i_mag_pu=x[2], i_ang_rad=x[3], f_hz=f, location=self.location)
+
+    def _full(self, rec_part, units):
+        """A slice batch for every unit of the group (rows of the others repeat the first ready)."""
+        rows = np.zeros(self.u, np.int64)
+        rows[units] = np.arange(units.size)
+        return jax.tree_util.tree_map(lambda x: jnp.asarray(x[rows]), rec_part)
+
+    def _chunks(self) -> list[Update]:
+        span = self.size + 2 * self.halo
+        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1)
+        if not ready.any():
+            return []
+        units = np.flatnonzero(ready)
+        recs = self._full(self._slices(units), units)
+        first = ready & ~self.started
+        nxt = ready & self.started
+        blocks = carries = None
+        if first.any():
+            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident)
+        if nxt.any():
+            b2, c2 = _next(recs, self.plants, self.carries, self.config, self.settings, self.ident)
+            if blocks is None:
+                blocks, carries = b2, c2
+            else:
+                blocks, carries = _where(jnp.asarray(first), (blocks, carries), (b2, c2))
+        if self.carries is None:
+            self.carries = carries
+            self.ring = jax.tree_util.tree_map(
+                lambda b: jnp.zeros((b.shape[0], self.window.blocks) + b.shape[1:], b.dtype), blocks)
+        else:
+            self.carries = _where(jnp.asarray(ready), carries, self.carries)
+        self.ring, self.filled, idents, verdicts = _absorb(
+            self.ring, self.filled, blocks, jnp.asarray(ready), self.carries, self.plants, self.ident,
+            self.window, self.verdict_settings)
+        t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
+        self.started |= ready
+        self.slice_start = np.where(ready, self.slice_start + self.size, self.slice_start)
+        return self._updates(np.flatnonzero(ready & (np.asarray(self.filled) >= self.window.blocks)),
+                             idents, verdicts, t_end)
+
+    def _updates(self, units, idents, verdicts, t_end) -> list[Update]:
+        host = jax.tree_util.tree_map(np.asarray, (idents, verdicts))
+        out = []
+        for u in units:
+            ident, v = jax.tree_util.tree_map(lambda x: x[u], host)
+            word, reasons = describe(v)
+            word = WORDS[word]
+            t = float(t_end[u])
+            named = word in ("identified", "weakly identified")
+            if word == "identified":
+                self.last_h[u], self.last_h_t[u] = float(ident.h_s), t
+            out.append(Update(
+                t=t, unit=self.names[u],
+                h_s=float(ident.h_s) if named else None,
+                h_ci95=(float(ident.h_ci95[0]), float(ident.h_ci95[1])) if named else None,
+                d_pu_s=float(ident.d_pu_s) if named else None,
+                d_ci95=(float(ident.d_ci95[0]), float(ident.d_ci95[1])) if named else None,
+                verdict=word, reasons=tuple(reasons),
+                age_s=None if self.last_h_t[u] is None else round(t - self.last_h_t[u], 9),
+                last_h_s=self.last_h[u], segment=int(self.segment[u]), window_s=self.window.window_s,
+                samples=int(ident.samples)))
+        return out
+
+
+def _where(mask, a, b):
+    """Per unit (leading axis): a where ``mask``, else b."""
+    return jax.tree_util.tree_map(
+        lambda x, y: jnp.where(mask.reshape((-1,) + (1,) * (jnp.ndim(x) - 1)), x, y), a, b)
+
+
+def verdict_words() -> tuple[str, ...]:
+    """The verdicts an :class:`Update` can carry, best first."""
+    return tuple(WORDS[v] for v in VERDICTS)
+
+
+__all__ = ["Blocks", "OnlineGroup", "Update", "verdict_words"]
