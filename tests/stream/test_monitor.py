@@ -22,6 +22,7 @@ from jaxdse._core.windowed import WindowSettings
 from jaxdse._io.config import load_config
 from jaxdse._io.errors import InputError
 from jaxdse._io.measurement import read_measurement
+from jaxdse._stream import c37118 as c3
 from jaxdse._stream import pmu_sim
 from jaxdse._stream.monitor import Monitor, load_monitor, replay_recording
 from jaxdse._stream.online import OnlineGroup
@@ -74,10 +75,11 @@ def test_windowed_estimate_is_right_and_covers(example):
 
 def test_chunks_do_not_change_h(example):
     """The same samples in chunks of 1 s or 2 s: the same sums, so the same H (the front end's
-    context, the filters, the governor and its low-pass carry exactly across chunks)."""
+    context, the filters, the governor and its low-pass carry exactly across chunks; a
+    lookahead of 4 s makes the backward pass's start-up negligible, 1e-15)."""
     _, g, rec = example
-    a = {u.t: u for u in _feed(g, rec, WindowSettings(update_s=1.0, window_s=100.0))}
-    b = {u.t: u for u in _feed(g, rec, WindowSettings(update_s=2.0, window_s=100.0))}
+    a = {u.t: u for u in _feed(g, rec, WindowSettings(update_s=1.0, window_s=100.0, lookahead_s=4.0))}
+    b = {u.t: u for u in _feed(g, rec, WindowSettings(update_s=2.0, window_s=100.0, lookahead_s=4.0))}
     common = sorted(set(a) & set(b))
     assert common
     for t in common:
@@ -166,3 +168,38 @@ def test_unreachable_stream_ends_cleanly(example, tmp_path):
     assert summary["updates"] == 0 and summary["streams"][0]["disconnects"] >= 1
     assert any("reconnecting" in x for x in lines)
     assert math.isfinite(summary["wall_s"])
+
+
+def test_results_are_published_as_a_c37118_stream(example, tmp_path):
+    """The virtual PMU: a C37.118 client reads CFG-2 (one station per unit, analogs H, H_LO,
+    H_HI, D, AGE) and data frames whose analogs are the updates' values."""
+    import threading
+    import time
+
+    config, _, _ = example
+    server = pmu_sim.PmuServer(pmu_sim.load_source(config), port=0, speed=20.0)
+    with server.serve_in_thread() as (host, port):
+        (tmp_path / "mon.toml").write_text(
+            f'fleet = "{config}"\nwindow_s = 20.0\n[stream]\nhost = "{host}"\nport = {port}\n'
+            '[publish]\nport = 0\nidcode = 77\n')
+        mon = Monitor(load_monitor(tmp_path / "mon.toml"), tmp_path / "live", log=lambda line: None)
+        th = threading.Thread(target=mon.run, args=(8.0,), daemon=True)
+        th.start()
+        deadline = time.monotonic() + 10
+        while (mon.publisher.bound is None) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        with pmu_sim.PmuClient(*mon.publisher.bound, idcode=77, timeout=5.0) as client:
+            cfg = client.config()
+            assert [a.name for a in cfg.stations[0].analogs] == ["H", "H_LO", "H_HI", "D", "AGE"]
+            assert cfg.stations[0].name == "unit1" and cfg.data_rate == 1
+            client.start()
+            frames = [f for f in client.frames(seconds=7.0) if isinstance(f, c3.DataFrame)]
+        th.join(timeout=30)
+    assert frames
+    live = {round(x["t"], 6): x for x in map(json.loads, (tmp_path / "live" / "updates.jsonl").read_text().splitlines())}
+    for f in frames:
+        st = f.stations[0]
+        x = live[round(c3.frame_time(f, cfg.time_base), 6)]
+        assert c3.Stat.from_word(st.stat).data_error == 0 and not c3.Stat.from_word(st.stat).trigger
+        assert st.analogs[0] == pytest.approx(x["H_s"], rel=1e-6)          # float32 on the wire
+        assert st.analogs[1] == pytest.approx(x["H_ci95"][0], rel=1e-6)

@@ -50,6 +50,8 @@ from .pmu_sim import PmuClient, _short_names, served_units, source_units
 MAX_BACKOFF_S = 10.0
 FREQUENCY_RANGE_HZ = 5.0
 """A frequency this far from nominal is no measurement (the readers' ``MAX_FREQUENCY_SAMPLE_OFFSET_HZ``)."""
+MAX_TIMINGS = 1_000_000
+"""Per-frame processing times kept for the summary (a day at 60 frames/s is 5 million)."""
 MAX_PENDING_FRAMES = 4096
 """Frames the reorder buffer holds at most (its ``reorder_s`` covers far fewer)."""
 
@@ -70,6 +72,11 @@ class StreamSpec:
     current_direction: str = "out_of_plant"
     """The direction of the streamed current I1: out of the plant (generator convention, as
     ``jaxdse pmu-sim`` serves it) or into it."""
+    frequency: str = "stream"
+    """"stream": the stations' FREQ; "angle": derived from the voltage angle as the estimator
+    does for a recording without a frequency channel (FREQ is then not used: a PMU whose FREQ
+    is itself a difference of the angle adds its smoothing; a central difference at 30
+    frames/s moved H by +1 % on NASPI OSL case 1)."""
     stations: tuple[tuple[str, str], ...] = ()
     """(unit, station name) pairs; units not named are found by their name's first 16 characters."""
 
@@ -93,10 +100,13 @@ class MonitorConfig:
     h_below_s: float | None = None
     hysteresis: float = 0.05
     notes: tuple[str, ...] = ()
+    publish: dict | None = None
+    """[publish] host, port, idcode of the virtual PMU (None: not published)."""
 
 
 STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
-TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm"}
+TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish"}
+PUBLISH_KEYS = {"host", "port", "idcode"}
 
 
 def load_monitor(path) -> MonitorConfig:
@@ -113,11 +123,20 @@ def load_monitor(path) -> MonitorConfig:
     if window_s < update_s:
         raise InputError(path, f"window_s = {window_s} is shorter than update_s = {update_s}", key="window_s")
     alarm = subtable(path, data, "alarm", "alarm")
+    publish = None
+    if "publish" in data:
+        pub = subtable(path, data, "publish", "publish")
+        no_unknown(path, pub, PUBLISH_KEYS, "publish.")
+        publish = {"host": typed_value(path, str, pub.get("host", "127.0.0.1"), "publish.host"),
+                   "port": typed_value(path, int, pub.get("port", 4713), "publish.port", 0),
+                   "idcode": typed_value(path, int, pub.get("idcode", 7734), "publish.idcode", 1)}
     no_unknown(path, alarm, {"h_below_s", "hysteresis"}, "alarm.")
     tables = data.get("stream", [{}])
     if isinstance(tables, dict):
         tables = [tables]
     runs, skipped = source_units(source)[:2]
+    tile = typed_value(path, int, data.get("tile", 1), "tile", 1)
+    runs = tiled(runs, tile)
     names = [n for n, _ in runs]
     streams, owner = [], {}
     for k, t in enumerate(tables):
@@ -135,6 +154,8 @@ def load_monitor(path) -> MonitorConfig:
                              'protocol = "c37.118"', key=key + "protocol")
         if kw.get("transport", "tcp") not in ("tcp", "udp"):
             raise InputError(path, f"must be \"tcp\" or \"udp\", got {kw['transport']!r}", key=key + "transport")
+        if kw.get("frequency", "stream") not in ("stream", "angle"):
+            raise InputError(path, "must be \"stream\" or \"angle\"", key=key + "frequency")
         if kw.get("current_direction", "out_of_plant") not in ("out_of_plant", "into_plant"):
             raise InputError(path, "must be \"out_of_plant\" or \"into_plant\"", key=key + "current_direction")
         stations = subtable(path, t, "stations", key + "stations")
@@ -156,7 +177,14 @@ def load_monitor(path) -> MonitorConfig:
     return MonitorConfig(path, source, tuple(streams), units, update_s, window_s,
                          typed_value(path, float, alarm["h_below_s"], "alarm.h_below_s", 0)
                          if "h_below_s" in alarm else None,
-                         typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes)
+                         typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes,
+                         publish)
+
+
+def tiled(runs: list, copies: int) -> list:
+    """``runs`` repeated ``copies`` times, named as ``jaxdse pmu-sim --tile`` names its stations
+    (``name~2``, ...): many units from a few plants, for capacity tests."""
+    return [(n if k == 0 else f"{n}~{k + 1}", g) for k in range(copies) for n, g in runs]
 
 
 # --- the connections -------------------------------------------------------------------------
@@ -208,7 +236,8 @@ def unit_groups(units) -> list[list[int]]:
     return list(groups.values())
 
 
-def make_groups(units, rate: float, cfg: MonitorConfig, est) -> list[tuple[OnlineGroup, np.ndarray]]:
+def make_groups(units, rate: float, cfg: MonitorConfig, est,
+                with_frequency: bool = True) -> list[tuple[OnlineGroup, np.ndarray]]:
     """The :class:`OnlineGroup` of each group of ``units`` and the units' indices in it."""
     from .._core.windowed import WindowSettings
 
@@ -219,7 +248,8 @@ def make_groups(units, rate: float, cfg: MonitorConfig, est) -> list[tuple[Onlin
         out.append((OnlineGroup([u.name for u in us], [u.run.plant for u in us],
                                 [u.run.measurement.location for u in us], rate, window, est.observer,
                                 est.settings, est.identify, est.verdict,
-                                max_gap_s=min(u.run.measurement.max_gap_s for u in us)), np.asarray(idx)))
+                                max_gap_s=min(u.run.measurement.max_gap_s for u in us),
+                                with_frequency=with_frequency), np.asarray(idx)))
     return out
 
 
@@ -292,7 +322,7 @@ class _Stream:
                 missing.append(full)
         self.rate = frame.rate_hz
         self.reorder = max(0, math.ceil(self.spec.reorder_s * self.rate - 1e-9))
-        self.groups = make_groups(self.units, self.rate, self.cfg, self.est)
+        self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream")
         self.heap, self.held, self.released, self.newest = [], set(), None, None
         self._new_part()
         mapped = int((self.pos >= 0).sum())
@@ -309,9 +339,8 @@ class _Stream:
         return out
 
     def _new_part(self):
-        if self.file is not None:
-            self.file.close()
-        self.file = None
+        self.close()
+        self.rows = []
         if self.out_dir is None:
             return
         name = f"recording_{self.k}_{len(self.parts) + 1}.csv"
@@ -369,6 +398,8 @@ class _Stream:
         v, i, f, usable = screen(v, i, np.where(ok, np.asarray(a.freq, float)[p], np.nan), stat,
                                  self.machine_scale, self.f_nominal)
         self.unusable += ~usable & ok
+        if self.spec.frequency != "stream":
+            f = np.full_like(f, np.nan)
         vm, va, im, ia = np.abs(v), np.angle(v), np.abs(i), np.angle(i)
         if self.file is not None:
             part = self.parts[-1]
@@ -376,21 +407,26 @@ class _Stream:
                 part["index0"] = idx
             cols = np.stack([vm, va, im, ia, f, stat.astype(float)], axis=1)
             cols[~usable, :5] = np.nan
-            self.file.write(repr((idx - part["index0"]) / self.rate) + ","
-                            + ",".join(_text(x) for x in cols.reshape(n * len(COLUMNS))) + "\n")
+            self.rows.append(np.concatenate([[(idx - part["index0"]) / self.rate], cols.reshape(-1)]))
+            if len(self.rows) >= self.rate:
+                self._flush()
         out = []
         for group, members in self.groups:
             out += group.push(idx, vm[members], va[members], im[members], ia[members], f[members], usable[members])
         return out
 
+    def _flush(self):
+        """Write the rows held (%.17g: every float64 reads back exactly; NaN as nan)."""
+        if self.rows:
+            fmt = ",".join(["%.17g"] * self.rows[0].size) + "\n"
+            self.file.write("".join(fmt % tuple(r) for r in self.rows))
+            self.rows = []
+
     def close(self):
         if self.file is not None:
+            self._flush()
             self.file.close()
             self.file = None
-
-
-def _text(x: float) -> str:
-    return "" if not math.isfinite(x) else (str(int(x)) if x == int(x) and abs(x) < 1e15 else repr(float(x)))
 
 
 def update_line(u: Update, alarm: bool, delay_s: float | None = None) -> dict:
@@ -414,7 +450,7 @@ class Monitor:
         self.log = log or (lambda line: print(f"jaxdse monitor: {line}", file=sys.stderr, flush=True))
         self.console = console
         self.est = source_units(cfg.source)
-        names = [n for n, _ in self.est.runs]
+        names = [u.name for u in cfg.units]
         self.streams = [_Stream(k, spec, [u for u in cfg.units if u.stream == k], names, cfg, self.est,
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
         self.alarms = {}
@@ -423,6 +459,14 @@ class Monitor:
         self.delays = []
         self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
         self._next_report = None
+        self.publisher = None
+        if cfg.publish is not None:
+            from .publish import Publisher
+
+            f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
+            self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
+                                       log=self.log, **cfg.publish)
+        self.processing = []     # seconds of the main thread per data frame (updates included)
 
     def emit(self, updates: list[Update]):
         now = time.time()
@@ -436,6 +480,12 @@ class Monitor:
                 self._jsonl.write(json.dumps(update_line(u, alarm, delay)) + "\n")
         if updates and self._jsonl is not None:
             self._jsonl.flush()
+        if updates and self.publisher is not None:
+            by_t = defaultdict(list)
+            for u in updates:
+                by_t[u.t].append(u)
+            for t in sorted(by_t):
+                self.publisher.publish(t, by_t[t], self.alarms)
         if updates:
             self._report(max(u.t for u in updates))
 
@@ -476,6 +526,9 @@ class Monitor:
                                     name=f"jaxdse-stream-{k}") for k, s in enumerate(self.streams)]
         for t in threads:
             t.start()
+        if self.publisher is not None:
+            host, port = self.publisher.start()
+            self.log(f"publishing on tcp {host}:{port} (IDCODE {self.publisher.idcode}, one station per unit)")
         t0 = time.monotonic()
         try:
             while duration_s is None or time.monotonic() - t0 < duration_s:
@@ -500,13 +553,18 @@ class Monitor:
                 s.close()
             if self._jsonl is not None:
                 self._jsonl.close()
+            if self.publisher is not None:
+                self.publisher.stop()
         return self._finish(time.monotonic() - t0)
 
     def _handle(self, item):
         k, kind, x = item
         s = self.streams[k]
         if kind == "frame":
+            t0 = time.perf_counter()
             self.emit(s.on_config(x) if isinstance(x, c3.ConfigFrame) else s.on_data(x))
+            if isinstance(x, c3.DataFrame) and len(self.processing) < MAX_TIMINGS:
+                self.processing.append(time.perf_counter() - t0)
         elif kind == "counts":
             s.decoder_counts = x
         elif kind == "down":
@@ -518,11 +576,14 @@ class Monitor:
         d = np.asarray(self.delays)
         summary = {
             "wall_s": round(wall_s, 3), "updates": self.updates,
-            "delay_s": None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99))},
+            "delay_s": None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99)),
+                                                 "max": float(d.max())},
+            "processing_ms_per_frame": _percentiles(1e3 * np.asarray(self.processing)),
             "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts),
                          "decoder_rejected": {k: v for k, v in s.decoder_counts.items() if v},
                          "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n}}
                         for s in self.streams],
+            "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
             "notes": list(self.cfg.notes),
         }
@@ -531,6 +592,13 @@ class Monitor:
             (self.out_dir / "replay.toml").write_text(replay_toml(self.cfg, parts))
             (self.out_dir / "monitor.json").write_text(json.dumps(summary, indent=1))
         return summary
+
+
+def _percentiles(x: np.ndarray) -> dict | None:
+    if x.size == 0:
+        return None
+    return {"frames": int(x.size), "median": float(np.median(x)), "p99": float(np.quantile(x, 0.99)),
+            "mean": float(x.mean()), "max": float(x.max())}
 
 
 def _utc(t: float) -> str:
@@ -597,7 +665,7 @@ def replay_recording(path, out_dir: Path | None = None, log=None) -> list[dict]:
                 table[:, j, sl] = [np.asarray(r.v_mag_pu), np.asarray(r.v_ang_rad), np.asarray(r.i_mag_pu),
                                    np.asarray(r.i_ang_rad), f]
                 usable[j, sl] = True
-        groups = make_groups(units, rate, cfg, est)
+        groups = make_groups(units, rate, cfg, est, cfg.streams[int(part["stream"])].frequency == "stream")
         for c in range(hi - lo):
             for group, members in groups:
                 for u in group.push(lo + c, *table[:, members, c], usable[members, c]):

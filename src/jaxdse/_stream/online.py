@@ -76,13 +76,14 @@ class Update:
 
 
 @eqx.filter_jit
-def _first(recs, plants, config, settings, ident):
-    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None))(recs, plants)
+def _first(recs, plants, config, settings, ident, size):
+    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None, size))(recs, plants)
 
 
 @eqx.filter_jit
-def _next(recs, plants, carries, config, settings, ident):
-    return jax.vmap(lambda r, p, c: window_chunk(r, p, config, settings, ident, c))(recs, plants, carries)
+def _next(recs, plants, carries, config, settings, ident, size):
+    return jax.vmap(lambda r, p, c: window_chunk(r, p, config, settings, ident, c, size))(recs, plants,
+                                                                                        carries)
 
 
 @eqx.filter_jit
@@ -129,10 +130,11 @@ class OnlineGroup:
         self.ident, self.verdict_settings = identify_settings, verdict_settings
         self.size = window.chunk_samples(self.rate)
         self.halo = halo(settings)
+        self.tail = window.tail_samples(self.rate, settings)
         self.max_gap = int(math.floor(max_gap_s * self.rate + 1e-6))
         self.with_frequency = with_frequency
-        span = self.size + 2 * self.halo
-        self.capacity = span + self.size + self.max_gap + 2
+        self.span = self.halo + self.size + self.tail
+        self.capacity = self.span + self.size + self.max_gap + 2
         self.buf = np.full((5, self.u, self.capacity), np.nan)
         self.base = None                 # grid index of buffer column 0
         self.last_valid = np.full(self.u, -1, np.int64)   # grid index of each unit's last usable sample
@@ -205,7 +207,7 @@ class OnlineGroup:
     # --- chunks ------------------------------------------------------------------------------
 
     def _slices(self, units):
-        span = self.size + 2 * self.halo
+        span = self.span
         cols = (self.slice_start[units] - self.base)[:, None] + np.arange(span)[None, :]
         x = self.buf[:, units[:, None], cols]                     # [5, k, span]
         t = np.arange(span) * self.dt
@@ -220,8 +222,7 @@ class OnlineGroup:
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x[rows]), rec_part)
 
     def _chunks(self) -> list[Update]:
-        span = self.size + 2 * self.halo
-        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1)
+        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + self.span - 1)
         if not ready.any():
             return []
         units = np.flatnonzero(ready)
@@ -230,9 +231,9 @@ class OnlineGroup:
         nxt = ready & self.started
         blocks = carries = None
         if first.any():
-            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident)
+            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident, self.size)
         if nxt.any():
-            b2, c2 = _next(recs, self.plants, self.carries, self.config, self.settings, self.ident)
+            b2, c2 = _next(recs, self.plants, self.carries, self.config, self.settings, self.ident, self.size)
             if blocks is None:
                 blocks, carries = b2, c2
             else:

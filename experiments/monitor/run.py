@@ -1,0 +1,385 @@
+"""``jaxdse monitor`` end to end on loopback (issue 35): ``jaxdse pmu-sim`` serves a recording
+as a live C37.118.2 stream, the monitor estimates every unit's H every second.
+
+    python experiments/monitor/run.py                  # everything, about 15 minutes on 2 cores
+    python experiments/monitor/run.py --only osl npcc  # some parts
+
+Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through the public API):
+
+* ``osl``: NASPI OSL contest case 1 (22 plants of the WECC 240 case, 90 s at 30 frames/s, a
+  forced oscillation), in real time, ``window_s`` 60: per unit, every update that names an H
+  against the batch fleet run's interval (``experiments/naspi_osl_case1/results.json``), the
+  time of the first estimate and the spacing of the others; then the recording through
+  ``jaxdse run replay.toml``: the largest difference from the live updates;
+* ``npcc``: the ANDES npcc line trip (10 units, 70 s at 60 frames/s, the trip at 10 s), in real
+  time, ``window_s`` 60: against ``experiments/andes_bench/fleet_results.json``'s batch
+  intervals and ANDES's H; replay as above;
+* ``ambient``: the ANDES npcc ambient recording (600 s at 30 frames/s, load noise only) at 10x,
+  the default ``window_s`` 120: what the verdicts say when nothing excites H;
+* ``faults``: OSL case 1 at 2x, ``window_s`` 20, with the faults of ``FAULTS``, one kind at a
+  time where it restarts the estimators: per fault what the monitor counted and did, the
+  median H of the last update before and of the first after it, and any update that names an H
+  whose interval misses the batch interval;
+* ``capacity``: 1, 22 and 506 units at 30 frames/s (OSL, tiled 23x) and 1, 20 and 500 at 60
+  frames/s (npcc, tiled 2x and 50x), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
+  the main thread's processing time per frame against the frame period, and the delay from a
+  frame's timestamp to its estimate (median, 99th percentile, largest). A run keeps up when
+  its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``).
+
+Writes results.json and results.md beside this file.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+
+import jaxdse as jd  # noqa: E402
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+OSL = ROOT / "experiments" / "naspi_osl_case1" / "fleet.toml"
+NPCC = ROOT / "experiments" / "andes_bench" / "fleet_npcc.toml"
+CAPACITY_S = 45.0
+WARM_UP_S = 8.0
+KEEP_UP_DELAY_S = 5.0
+FAULTS = (
+    ("drop@25+0.3", "10 frames dropped (bridged)"),
+    ("error@30+0.2", "STAT data error 11 for 0.2 s"),
+    ("crc@35+0.2", "bad CRC for 0.2 s"),
+    ("late=0.15@40+0.3", "frames 0.15 s late"),
+    ("sync@45+0.3", "STAT sync lost for 0.3 s"),
+    ("time-quality@50+2", "STAT time quality 7 for 2 s (usable)"),
+    ("trigger@52+1", "STAT trigger bit (usable)"),
+)
+RESTARTING = (
+    ("drop@30+2", "2 s of frames dropped (a long gap)"),
+    ("absent@30+1", "absent data (STAT 10, NaN) for 1 s"),
+    ("config-change=2@30", "a configuration change (phasors float <-> integer)"),
+    ("disconnect@30", "the connection closed"),
+)
+
+
+def serve(fleet: Path, *args: str) -> tuple[subprocess.Popen, int]:
+    """``jaxdse pmu-sim FLEET --port 0 ARGS``; returns the process and its port."""
+    proc = subprocess.Popen([sys.executable, "-c", "from jaxdse._app.cli import entry; entry()", "pmu-sim",
+                             str(fleet), "--port", "0", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True)
+    line = proc.stdout.readline()
+    m = re.search(r":(\d+) ", line)
+    if not m:
+        proc.kill()
+        raise RuntimeError(f"pmu-sim did not start: {line}{proc.stderr.read()}")
+    return proc, int(m.group(1))
+
+
+def monitor(fleet: Path, port: int, out: Path, seconds: float, window_s: float, tile: int = 1) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = out / "monitor.toml"
+    cfg.write_text(f'fleet = "{fleet}"\nupdate_s = 1.0\nwindow_s = {window_s}\ntile = {tile}\n'
+                   f"[stream]\nport = {port}\ntimeout_s = 3.0\nfrequency = \"{frequency(fleet)}\"\n")
+    lines = []
+    summary = jd.Monitor(jd.load_monitor(cfg), out / "live", log=lines.append, console=lambda x: None).run(seconds)
+    summary["log"] = lines
+    summary["updates_list"] = [json.loads(x) for x in (out / "live" / "updates.jsonl").read_text().splitlines()]
+    return summary
+
+
+def frequency(fleet: Path) -> str:
+    """OSL case 1 has no frequency channel: pmu-sim's FREQ is a central difference of the angle,
+    so the monitor derives it as the batch run does ("angle"); the ANDES recordings carry the
+    bus frequency ("stream")."""
+    return "angle" if "naspi" in str(fleet) else "stream"
+
+
+def run_part(fleet, out, seconds, window_s, *sim_args, tile=1):
+    proc, port = serve(fleet, *sim_args)
+    try:
+        return monitor(fleet, port, out, seconds, window_s, tile)
+    finally:
+        proc.terminate()
+        proc.wait(timeout=30)
+
+
+def against_batch(updates, batch: dict) -> dict:
+    """Per unit: updates that name an H, and how many of them lie within the batch interval."""
+    per = {}
+    for u in updates:
+        if u["H_s"] is None:
+            continue
+        lo, hi = batch[u["unit"]]
+        p = per.setdefault(u["unit"], {"named": 0, "within_batch_interval": 0, "last_H_s": None})
+        p["named"] += 1
+        p["within_batch_interval"] += bool(lo <= u["H_s"] <= hi)
+        p["last_H_s"], p["last_ci95"], p["last_verdict"] = u["H_s"], u["H_ci95"], u["verdict"]
+    return per
+
+
+def replay_difference(out: Path, live) -> dict:
+    again = jd.replay_recording(out / "live" / "replay.toml", out / "replayed")
+    same_t = [x["t"] for x in again] == [x["t"] for x in live]
+    diffs = [abs(a["H_s"] / b["H_s"] - 1) for a, b in zip(again, live) if a["H_s"] and b["H_s"]]
+    cis = [abs(a["H_ci95"][k] / b["H_ci95"][k] - 1) for a, b in zip(again, live)
+           if a["H_ci95"] and b["H_ci95"] for k in (0, 1) if np.isfinite(b["H_ci95"][k])]
+    return {"updates": len(again), "same_timestamps": same_t,
+            "largest_relative_difference_H": max(diffs, default=0.0),
+            "largest_relative_difference_interval": max(cis, default=0.0)}
+
+
+def timing(updates, window_s: float, t_first_frame: float) -> dict:
+    by = {}
+    for u in updates:
+        by.setdefault(u["unit"], []).append(u["t"])
+    first = [min(t) - t_first_frame for t in by.values()]
+    steps = np.concatenate([np.diff(sorted(t)) for t in by.values()])
+    return {"first_estimate_after_s": {"min": float(min(first)), "max": float(max(first))},
+            "update_spacing_s": {"min": float(steps.min()), "max": float(steps.max())} if steps.size else None,
+            "window_s": window_s}
+
+
+def first_frame_time(out: Path) -> float:
+    import tomllib
+
+    part = tomllib.loads((out / "live" / "replay.toml").read_text())["replay"]["part"][0]
+    return part["index0"] / part["frame_rate_hz"]
+
+
+def verdicts(updates) -> dict:
+    out = {}
+    for u in updates:
+        out[u["verdict"]] = out.get(u["verdict"], 0) + 1
+    return out
+
+
+def part_osl(work):
+    plants = json.loads((ROOT / "experiments" / "naspi_osl_case1" / "results.json").read_text())["plants"]
+    batch = {p["name"]: p["H_ci95"] for p in plants}
+    dyr = {p["name"]: p["H_reference_s"] for p in plants}
+    s = run_part(OSL, work / "osl", 95.0, 60.0)
+    ups = s["updates_list"]
+    per = against_batch(ups, batch)
+    return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
+            "timing": timing(ups, 60.0, first_frame_time(work / "osl")),
+            "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
+            "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
+            "dyr_in_interval": sum(1 for u in ups if u["H_s"] is not None
+                                   and u["H_ci95"][0] <= dyr[u["unit"]] <= u["H_ci95"][1]),
+            "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
+            "replay": replay_difference(work / "osl", ups), "streams": s["streams"], "log": s["log"]}
+
+
+def part_npcc(work):
+    rows = json.loads((ROOT / "experiments" / "andes_bench" / "fleet_results.json").read_text())["rows"]
+    batch = {r["unit"]: r["H_ci95"] for r in rows if r["case"] == "npcc" and r["event"] == "line_trip"}
+    truth = {r["unit"]: r["H_reference_s"] for r in rows if r["case"] == "npcc" and r["event"] == "line_trip"}
+    s = run_part(NPCC, work / "npcc", 75.0, 60.0)
+    ups = s["updates_list"]
+    per = against_batch(ups, batch)
+    for name, p in per.items():
+        p["H_andes_s"] = truth[name]
+    return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
+            "timing": timing(ups, 60.0, first_frame_time(work / "npcc")),
+            "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
+            "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
+            "truth_in_interval": sum(1 for u in ups if u["H_s"] is not None
+                                     and u["H_ci95"][0] <= truth[u["unit"]] <= u["H_ci95"][1]),
+            "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
+            "replay": replay_difference(work / "npcc", ups), "streams": s["streams"]}
+
+
+def part_ambient(work):
+    fleet = work / "ambient_fleet.toml"
+    fleet.write_text(NPCC.read_text().replace('"data/npcc', f'"{NPCC.parent}/data/npcc')
+                     .replace("line_trip.csv.gz", "ambient.csv.gz"))
+    s = run_part(fleet, work / "ambient", 65.0, 120.0, "--speed", "10")
+    ups = s["updates_list"]
+    truth = {m["tag"]: m["H_s_mbase"] for m in json.loads(
+        (NPCC.parent / "data" / "npcc" / "truth.json").read_text())["machines"]}
+    named = [u for u in ups if u["H_s"] is not None]
+    return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
+            "named_truth_in_interval": sum(u["H_ci95"][0] <= truth[u["unit"]] <= u["H_ci95"][1] for u in named),
+            "named": len(named)}
+
+
+def _fault_rows(s, batch, faults, t0):
+    ups = s["updates_list"]
+    rows = []
+    for spec, what in faults:
+        start = float(re.search(r"@([\d.]+)", spec).group(1))
+        dur = float(m.group(1)) if (m := re.search(r"\+([\d.]+)", spec)) else 0.0
+        before = [u for u in ups if u["t"] - t0 < start and u["H_s"] is not None]
+        after = [u for u in ups if u["t"] - t0 > start + dur + 1.0 and u["H_s"] is not None]
+        last_before = {u["unit"]: u["H_s"] for u in before}
+        first_after = {}
+        for u in after:
+            first_after.setdefault(u["unit"], u)
+        rows.append({"fault": spec, "what": what,
+                     "H_median_before_s": float(np.median(list(last_before.values()))) if last_before else None,
+                     "H_median_after_s": float(np.median([u["H_s"] for u in first_after.values()]))
+                     if first_after else None,
+                     "first_estimate_after_fault_s": min((u["t"] - t0 - start for u in first_after.values()),
+                                                         default=None)})
+    wrong = [u for u in ups if u["H_s"] is not None and u["verdict"] == "identified"
+             and (u["H_ci95"][1] < batch[u["unit"]][0] or u["H_ci95"][0] > batch[u["unit"]][1])]
+    return rows, wrong
+
+
+def part_faults(work):
+    batch = {p["name"]: p["H_ci95"] for p in json.loads(
+        (ROOT / "experiments" / "naspi_osl_case1" / "results.json").read_text())["plants"]}
+    out = {"runs": []}
+    runs = [("minor", FAULTS)] + [(spec.split("@")[0].split("=")[0], ((spec, what),)) for spec, what in RESTARTING]
+    for name, faults in runs:
+        args = ["--speed", "2"] + [a for spec, _ in faults for a in ("--fault", spec)]
+        s = run_part(OSL, work / f"faults_{name}", 50.0, 20.0, *args)
+        t0 = first_frame_time(work / f"faults_{name}")
+        rows, wrong = _fault_rows(s, batch, faults, t0)
+        st = s["streams"][0]
+        out["runs"].append({"run": name, "faults": rows, "updates": len(s["updates_list"]),
+                            "verdicts": verdicts(s["updates_list"]),
+                            "identified_outside_batch_interval": len(wrong),
+                            "counts": {k: st.get(k, 0) for k in ("frames", "missing_frames", "late_or_repeated",
+                                                                 "off_grid", "config_changes", "disconnects")},
+                            "decoder_rejected": st.get("decoder_rejected", {}),
+                            "unusable_samples": sum(st.get("unusable_samples", {}).values()),
+                            "restarts": max((u["segment"] for u in s["updates_list"]), default=0) - 1,
+                            "log": [x for x in s["log"] if "stream" in x]})
+    return out
+
+
+def part_capacity(work):
+    rows = []
+    for fleet, rate, tiles, units in ((OSL, 30, (1, 1, 23), (1, 22, 506)), (NPCC, 60, (1, 2, 50), (1, 20, 500))):
+        for tile, n in zip(tiles, units):
+            out = work / f"capacity_{rate}_{n}"
+            out.mkdir(parents=True, exist_ok=True)
+            cfg = out / "monitor.toml"
+            text = (f'fleet = "{fleet}"\nupdate_s = 1.0\nwindow_s = 30.0\ntile = {tile}\n[stream]\ntimeout_s = 3.0\n'
+                    f'frequency = "{frequency(fleet)}"\n')
+            cfg.write_text(text)
+            if n == 1:
+                text += f"units = {json.dumps([jd.load_monitor(cfg).units[0].name])}\n"
+            for seconds in (WARM_UP_S, CAPACITY_S):    # the first compiles (the jit cache is the process's)
+                proc, port = serve(fleet, "--tile", str(tile), "--duration", str(seconds))
+                try:
+                    cfg.write_text(text + f"port = {port}\n")
+                    t = time.perf_counter()
+                    s = jd.Monitor(jd.load_monitor(cfg), out / "live", log=lambda x: None,
+                                   console=lambda x: None).run(seconds + 3.0)
+                    wall = time.perf_counter() - t
+                finally:
+                    proc.terminate()
+                    proc.wait(timeout=30)
+            p = s["processing_ms_per_frame"] or {}
+            d = s["delay_s"] or {}
+            rows.append({"frames_per_s": rate, "units": len(s["latest"]) if s["latest"] else n, "units_served": n,
+                         "frame_period_ms": 1e3 / rate, "processing_ms_per_frame": p, "delay_s": d,
+                         "updates": s["updates"], "wall_s": round(wall, 1),
+                         "busy_fraction": p.get("mean", np.nan) * rate / 1e3 if p else None,
+                         "keeps_up": bool(d) and d.get("max", np.inf) <= KEEP_UP_DELAY_S})
+    return {"rows": rows, "seconds": CAPACITY_S, "keep_up_delay_s": KEEP_UP_DELAY_S}
+
+
+PARTS = {"osl": part_osl, "npcc": part_npcc, "ambient": part_ambient, "faults": part_faults,
+         "capacity": part_capacity}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="+", choices=list(PARTS), default=list(PARTS))
+    ap.add_argument("--work", default=str(HERE / "work"), help="folder for the runs' outputs")
+    args = ap.parse_args()
+    work = Path(args.work)
+    path = HERE / "results.json"
+    doc = json.loads(path.read_text()) if path.exists() else {}
+    doc["machine"] = f"{platform.machine()}, {os.cpu_count()} cores"
+    for name in args.only:
+        t = time.perf_counter()
+        print(f"{name} ...", flush=True)
+        doc[name] = PARTS[name](work)
+        doc[name]["wall_s"] = round(time.perf_counter() - t, 1)
+        path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+    (HERE / "results.md").write_text(report(doc))
+
+
+def _f(x, fmt=".3g"):
+    return "-" if x is None else format(x, fmt)
+
+
+def report(doc) -> str:
+    lines = ["# jaxdse monitor end to end on loopback", "", "Written by `experiments/monitor/run.py` "
+             f"({doc.get('machine', '')}).", ""]
+    for key, title in (("osl", "NASPI OSL case 1, 22 plants, 30 frames/s, real time, window 60 s"),
+                       ("npcc", "ANDES npcc line trip, 10 units, 60 frames/s, real time, window 60 s")):
+        r = doc.get(key)
+        if not r:
+            continue
+        t = r["timing"]
+        lines += [f"## {title}", "",
+                  f"- updates: {r['updates']} ({', '.join(f'{k} {v}' for k, v in r['verdicts'].items())}); "
+                  f"first estimate {t['first_estimate_after_s']['min']:.2f}-{t['first_estimate_after_s']['max']:.2f} s "
+                  f"after the first frame, then every {_f(t['update_spacing_s'] and t['update_spacing_s']['min'])}-"
+                  f"{_f(t['update_spacing_s'] and t['update_spacing_s']['max'])} s",
+                  f"- units naming an H: {r['units_naming_H']} of {r['units']}; updates naming an H within the batch "
+                  f"run's 95 % interval: {r['within_batch_interval']} of {r['named']}"
+                  + (f"; ANDES's H inside the update's interval: {r['truth_in_interval']} of {r['named']}"
+                     if "truth_in_interval" in r else "")
+                  + (f"; the .dyr H inside the update's interval: {r['dyr_in_interval']} of {r['named']}"
+                     if "dyr_in_interval" in r else ""),
+                  f"- delay from a frame's timestamp to its estimate: median {_f(r['delay_s']['median'])} s, "
+                  f"99 % {_f(r['delay_s']['p99'])} s",
+                  f"- replay (`jaxdse run replay.toml`): {r['replay']['updates']} updates, same timestamps: "
+                  f"{r['replay']['same_timestamps']}, largest relative difference of H "
+                  f"{r['replay']['largest_relative_difference_H']:.1e}, of its interval "
+                  f"{r['replay']['largest_relative_difference_interval']:.1e}", ""]
+    a = doc.get("ambient")
+    if a:
+        lines += ["## ANDES npcc ambient, 10 units, 30 frames/s at 10x, window 120 s", "",
+                  f"- updates: {a['updates']} ({', '.join(f'{k} {v}' for k, v in a['verdicts'].items())}); "
+                  f"of those naming an H, ANDES's H inside the interval: {a['named_truth_in_interval']} of {a['named']}",
+                  ""]
+    f = doc.get("faults")
+    if f:
+        lines += ["## Faults (OSL case 1 at 2x, window 20 s)", "",
+                  "| run | fault | what | H median before [s] | after [s] | first estimate after [s] |",
+                  "|---|---|---|---|---|---|"]
+        for run in f["runs"]:
+            for row in run["faults"]:
+                lines.append(f"| {run['run']} | `{row['fault']}` | {row['what']} | {_f(row['H_median_before_s'])} | "
+                             f"{_f(row['H_median_after_s'])} | {_f(row['first_estimate_after_fault_s'], '.1f')} |")
+        lines += ["", "| run | updates | verdicts | identified outside the batch interval | counts | decoder "
+                  "rejected | unusable samples | restarts |", "|---|---|---|---|---|---|---|---|"]
+        for run in f["runs"]:
+            lines.append(f"| {run['run']} | {run['updates']} | {run['verdicts']} | "
+                         f"{run['identified_outside_batch_interval']} | {run['counts']} | {run['decoder_rejected']} | "
+                         f"{run['unusable_samples']} | {run['restarts']} |")
+        lines.append("")
+    c = doc.get("capacity")
+    if c:
+        lines += [f"## Latency and capacity ({c['seconds']:g} s each, real time, window 30 s)", "",
+                  "| frames/s | units | frame period [ms] | processing per frame median / 99 % [ms] | busy "
+                  "fraction | delay median / 99 % / max [s] | keeps up |", "|---|---|---|---|---|---|---|"]
+        for r in c["rows"]:
+            p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
+            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r['frame_period_ms']:.1f} | "
+                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(r['busy_fraction'], '.2f')} | "
+                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | {r['keeps_up']} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":
+    main()
