@@ -143,6 +143,28 @@ def block() -> str:
         worst = max(abs(r["a2_error_percent"]) for r in core)
         out.append(f"- **Own simulator** (`experiments/core_accuracy/results.md`): online DREM a2 error at "
                    f"most {worst:.2f} % over {len(core)} recordings (noise-free and noisy).")
+    mon = load("experiments/monitor/results.json")
+    if mon and all(k in mon for k in ("osl", "npcc", "faults", "capacity")):
+        o, n, c = mon["osl"], mon["npcc"], mon["capacity"]["rows"]
+        keep = [r for r in c if r["keeps_up"]]
+        wrong = sum(r["identified_outside_batch_interval"] for r in mon["faults"]["runs"])
+        big = max(c, key=lambda r: (r["frames_per_s"], r["units"]))
+        out.append(
+            f"- **Live monitor on loopback** (`experiments/monitor/results.md`, `python experiments/monitor/run.py`, "
+            f"{mon['machine']}): `jaxdse pmu-sim` serving OSL case 1 ({o['units']} plants, window 60 s): first "
+            f"estimate {o['timing']['first_estimate_after_s']['min']:.1f} s after the first frame, then every "
+            f"{o['timing']['update_spacing_s']['max']:g} s; {o['within_batch_interval']} of {o['named']} updates "
+            f"naming an H within the batch run's interval, the .dyr H inside {o['dyr_in_interval']}; ANDES npcc "
+            f"line trip ({n['units']} units, 60 frames/s): ANDES's H inside {n['truth_in_interval']} of "
+            f"{n['named']}; the recording replayed by `jaxdse run`: H within "
+            f"{max(o['replay']['largest_relative_difference_H'], n['replay']['largest_relative_difference_H']):.0e}"
+            f" (relative); injected faults: `identified` outside the batch interval {wrong}. Delay from a frame's "
+            f"timestamp to its estimate (OSL, real time): median {o['delay_s']['median']:.2f} s, 99 % "
+            f"{o['delay_s']['p99']:.2f} s. Capacity: {big['units']} units at {big['frames_per_s']} frames/s "
+            f"{'keep' if big['keeps_up'] else 'do not keep'} up (processing {big['processing_ms_per_frame']['median']:.1f}"
+            f" ms per frame, median, against a {big['frame_period_ms']:.1f} ms period; delay 99 % "
+            f"{big['delay_s']['p99']:.2f} s); {len(keep)} of {len(c)} configurations keep up.")
+
     tb = load("benchmarks/results.json")
     if tb:
         tp = tb["throughput_gen_samples_per_s"]

@@ -26,7 +26,8 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   frame's timestamp to its estimate (median, 99th percentile, largest). A run keeps up when
   its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``).
 
-Writes results.json and results.md beside this file.
+Writes results.json, results.md and live_view.png (the live view during the ``osl`` part, by
+headless Chromium where it is installed) beside this file.
 """
 
 from __future__ import annotations
@@ -36,8 +37,10 @@ import json
 import os
 import platform
 import re
+import shutil
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -86,16 +89,34 @@ def serve(fleet: Path, *args: str) -> tuple[subprocess.Popen, int]:
     return proc, int(m.group(1))
 
 
-def monitor(fleet: Path, port: int, out: Path, seconds: float, window_s: float, tile: int = 1) -> dict:
+def monitor(fleet: Path, port: int, out: Path, seconds: float, window_s: float, tile: int = 1,
+            screenshot_at: float | None = None) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     cfg = out / "monitor.toml"
     cfg.write_text(f'fleet = "{fleet}"\nupdate_s = 1.0\nwindow_s = {window_s}\ntile = {tile}\n'
-                   f"[stream]\nport = {port}\ntimeout_s = 3.0\nfrequency = \"{frequency(fleet)}\"\n")
+                   f"[stream]\nport = {port}\ntimeout_s = 3.0\nfrequency = \"{frequency(fleet)}\"\n"
+                   + ("[view]\nport = 0\n" if screenshot_at is not None else ""))
     lines = []
-    summary = jd.Monitor(jd.load_monitor(cfg), out / "live", log=lines.append, console=lambda x: None).run(seconds)
+    mon = jd.Monitor(jd.load_monitor(cfg), out / "live", log=lines.append, console=lambda x: None)
+    if screenshot_at is not None:
+        threading.Thread(target=screenshot, args=(mon, screenshot_at, HERE / "live_view.png"), daemon=True).start()
+    summary = mon.run(seconds)
     summary["log"] = lines
     summary["updates_list"] = [json.loads(x) for x in (out / "live" / "updates.jsonl").read_text().splitlines()]
     return summary
+
+
+def screenshot(mon, at: float, path: Path):
+    """The live view as headless Chromium shows it, ``at`` seconds after the monitor started."""
+    browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    t0 = time.monotonic()
+    while mon.view.bound is None and time.monotonic() - t0 < 30:
+        time.sleep(0.1)
+    time.sleep(max(0.0, at - (time.monotonic() - t0)))
+    if browser and mon.view.bound:
+        subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--window-size=1400,1250",
+                        "--virtual-time-budget=3000", f"--screenshot={path}",
+                        "http://{}:{}/".format(*mon.view.bound)], capture_output=True, timeout=120)
 
 
 def frequency(fleet: Path) -> str:
@@ -105,10 +126,10 @@ def frequency(fleet: Path) -> str:
     return "angle" if "naspi" in str(fleet) else "stream"
 
 
-def run_part(fleet, out, seconds, window_s, *sim_args, tile=1):
+def run_part(fleet, out, seconds, window_s, *sim_args, tile=1, screenshot_at=None):
     proc, port = serve(fleet, *sim_args)
     try:
-        return monitor(fleet, port, out, seconds, window_s, tile)
+        return monitor(fleet, port, out, seconds, window_s, tile, screenshot_at)
     finally:
         proc.terminate()
         proc.wait(timeout=30)
@@ -168,7 +189,7 @@ def part_osl(work):
     plants = json.loads((ROOT / "experiments" / "naspi_osl_case1" / "results.json").read_text())["plants"]
     batch = {p["name"]: p["H_ci95"] for p in plants}
     dyr = {p["name"]: p["H_reference_s"] for p in plants}
-    s = run_part(OSL, work / "osl", 95.0, 60.0)
+    s = run_part(OSL, work / "osl", 95.0, 60.0, screenshot_at=88.0)
     ups = s["updates_list"]
     per = against_batch(ups, batch)
     return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),

@@ -170,18 +170,23 @@ def test_unreachable_stream_ends_cleanly(example, tmp_path):
     assert math.isfinite(summary["wall_s"])
 
 
-def test_results_are_published_as_a_c37118_stream(example, tmp_path):
+def test_results_are_published_and_shown(example, tmp_path):
     """The virtual PMU: a C37.118 client reads CFG-2 (one station per unit, analogs H, H_LO,
-    H_HI, D, AGE) and data frames whose analogs are the updates' values."""
+    H_HI, D, AGE) and data frames whose analogs are the updates' values. The live view: its
+    state as JSON, and the page as a person sees it (headless Chromium's DOM after its script
+    ran; skipped where Chromium is absent)."""
+    import shutil
+    import subprocess
     import threading
     import time
+    import urllib.request
 
     config, _, _ = example
     server = pmu_sim.PmuServer(pmu_sim.load_source(config), port=0, speed=20.0)
     with server.serve_in_thread() as (host, port):
         (tmp_path / "mon.toml").write_text(
             f'fleet = "{config}"\nwindow_s = 20.0\n[stream]\nhost = "{host}"\nport = {port}\n'
-            '[publish]\nport = 0\nidcode = 77\n')
+            '[publish]\nport = 0\nidcode = 77\n[view]\nport = 0\n')
         mon = Monitor(load_monitor(tmp_path / "mon.toml"), tmp_path / "live", log=lambda line: None)
         th = threading.Thread(target=mon.run, args=(8.0,), daemon=True)
         th.start()
@@ -193,8 +198,22 @@ def test_results_are_published_as_a_c37118_stream(example, tmp_path):
             assert [a.name for a in cfg.stations[0].analogs] == ["H", "H_LO", "H_HI", "D", "AGE"]
             assert cfg.stations[0].name == "unit1" and cfg.data_rate == 1
             client.start()
-            frames = [f for f in client.frames(seconds=7.0) if isinstance(f, c3.DataFrame)]
+            frames = [f for f in client.frames(seconds=6.0) if isinstance(f, c3.DataFrame)]
+        url = "http://{}:{}/".format(*mon.view.bound)
+        state = json.loads(urllib.request.urlopen(url + "state.json", timeout=5).read())
+        page = urllib.request.urlopen(url, timeout=5).read().decode()
+        dom = None
+        browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+        if browser:
+            dom = subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu", "--virtual-time-budget=3000",
+                                  "--dump-dom", url], capture_output=True, text=True, timeout=60).stdout
         th.join(timeout=30)
+    assert "<title>jaxdse monitor</title>" in page and "state.json" in page
+    (u,) = state["units"]
+    assert u["unit"] == "unit1" and u["history"] and u["latest"]["verdict"] == "identified"
+    assert state["streams"][0]["frames"] > 0
+    if dom is not None:
+        assert 'data-unit="unit1"' in dom and ">identified<" in dom and "<svg" in dom, dom[-2000:]
     assert frames
     live = {round(x["t"], 6): x for x in map(json.loads, (tmp_path / "live" / "updates.jsonl").read_text().splitlines())}
     for f in frames:

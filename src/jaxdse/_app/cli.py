@@ -331,12 +331,20 @@ MONITOR.toml:
   reorder_s = 0.2          # frames held this long for late ones
   timeout_s = 5.0          # a silent connection is made again (back-off 0.5 s to 10 s)
   current_direction = "out_of_plant"
+  frequency = "stream"     # the stations' FREQ; "angle": derived from the voltage angle
   units = ["G1", "G2"]     # the units this stream carries (default: all, with one stream)
   [stream.stations]        # unit -> station name, where the name is not the unit's own
   G1 = "PMU_PLANT_A"
   [alarm]
   h_below_s = 2.0          # an alarm when an identified H falls below this
   hysteresis = 0.05        # ... cleared when it rises 5 % above it
+  [publish]                # the results as a C37.118 stream (a "virtual PMU") for a PDC
+  port = 4713              # or a historian: per unit the analogs H, H_LO, H_HI, D, AGE;
+  idcode = 7734            # STAT 01 not excited, 11 failed, trigger bit: H alarm
+  [view]                   # a live web page: H with its interval over time per unit
+  port = 8050
+  (tile = K repeats the units K times, named as `jaxdse pmu-sim --tile K` names them:
+   capacity tests.)
 
 Per unit, the online identification runs chunk by chunk on the stream (the regression of
 `jaxdse run`'s [identify], its sums kept per update_s: the cost per frame does not grow with
@@ -353,13 +361,15 @@ stream as the monitor used it (recording_*.csv) with replay.toml, and monitor.js
 drops, late frames, disconnects, the delay from a frame's timestamp to its estimate). `jaxdse
 run DIR/replay.toml` replays the recording through the file readers: the same estimates.
 
-Listens nowhere; connects out only. Exit status 0 after --duration or on Ctrl-C; 2 on bad
-input with a one-line message.
+Listens only for [publish] and [view], on 127.0.0.1 unless their host says otherwise. Exit
+status 0 after --duration or on Ctrl-C; 2 on bad input with a one-line message.
 
 examples:
-  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712 --loop &
-  jaxdse monitor experiments/monitor/osl_monitor.toml --out live --duration 300
+  jaxdse pmu-sim examples/csv_positive_sequence.toml --port 4712 --speed 5 &
+  jaxdse monitor examples/monitor.toml --out live --duration 70     # then http://127.0.0.1:8050/
   jaxdse run live/replay.toml --out replayed
+  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712 &
+  jaxdse monitor experiments/monitor/osl_monitor.toml --out osl --duration 95
 """
 
 

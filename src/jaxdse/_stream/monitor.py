@@ -102,10 +102,12 @@ class MonitorConfig:
     notes: tuple[str, ...] = ()
     publish: dict | None = None
     """[publish] host, port, idcode of the virtual PMU (None: not published)."""
+    view: dict | None = None
+    """[view] host, port of the live web page (None: no page)."""
 
 
 STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
-TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish"}
+TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish", "view"}
 PUBLISH_KEYS = {"host", "port", "idcode"}
 
 
@@ -131,6 +133,12 @@ def load_monitor(path) -> MonitorConfig:
                    "port": typed_value(path, int, pub.get("port", 4713), "publish.port", 0),
                    "idcode": typed_value(path, int, pub.get("idcode", 7734), "publish.idcode", 1)}
     no_unknown(path, alarm, {"h_below_s", "hysteresis"}, "alarm.")
+    view = None
+    if "view" in data:
+        v = subtable(path, data, "view", "view")
+        no_unknown(path, v, {"host", "port"}, "view.")
+        view = {"host": typed_value(path, str, v.get("host", "127.0.0.1"), "view.host"),
+                "port": typed_value(path, int, v.get("port", 8050), "view.port", 0)}
     tables = data.get("stream", [{}])
     if isinstance(tables, dict):
         tables = [tables]
@@ -178,7 +186,7 @@ def load_monitor(path) -> MonitorConfig:
                          typed_value(path, float, alarm["h_below_s"], "alarm.h_below_s", 0)
                          if "h_below_s" in alarm else None,
                          typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes,
-                         publish)
+                         publish, view)
 
 
 def tiled(runs: list, copies: int) -> list:
@@ -272,6 +280,8 @@ def _layout(cfg: c3.ConfigFrame):
 
 
 COLUMNS = ("VM", "VA", "IM", "IA", "F", "STAT")
+COUNTS = ("frames", "missing_frames", "late_or_repeated", "off_grid", "reorder_overflow", "before_config",
+          "config_changes", "disconnects")
 """A unit's columns in a recording: |V| [pu], angle V [rad], |I| [pu], angle I [rad], f [Hz], STAT."""
 
 
@@ -299,7 +309,8 @@ class _Stream:
         self.newest = None
         self.parts = []
         self.file = None
-        self.counts = defaultdict(int)
+        # every key from the start: the live view's thread copies the dict while this one counts
+        self.counts = defaultdict(int, {k: 0 for k in COUNTS})
         self.decoder_counts = {}
         self.unusable = np.zeros(len(units), np.int64)
 
@@ -389,7 +400,6 @@ class _Stream:
         a = frame.arrays
         ph = a.phasors if isinstance(a.phasors, np.ndarray) else np.array(
             [np.concatenate([p[:2], np.full(max(0, 2 - len(p)), np.nan)]) for p in a.phasors])
-        n = len(self.units)
         ok = self.pos >= 0
         p = np.where(ok, self.pos, 0)
         v = np.where(ok, ph[p, 0], np.nan) / self.v_per_pu
@@ -466,6 +476,11 @@ class Monitor:
             f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
             self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
                                        log=self.log, **cfg.publish)
+        self.view = None
+        if cfg.view is not None:
+            from .view import LiveView
+
+            self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view)
         self.processing = []     # seconds of the main thread per data frame (updates included)
 
     def emit(self, updates: list[Update]):
@@ -476,8 +491,11 @@ class Monitor:
             self.delays.append(delay)
             self.updates += 1
             self.latest[u.unit] = u
+            line = update_line(u, alarm, delay)
             if self._jsonl is not None:
-                self._jsonl.write(json.dumps(update_line(u, alarm, delay)) + "\n")
+                self._jsonl.write(json.dumps(line) + "\n")
+            if self.view is not None:
+                self.view.add(line)
         if updates and self._jsonl is not None:
             self._jsonl.flush()
         if updates and self.publisher is not None:
@@ -526,6 +544,9 @@ class Monitor:
                                     name=f"jaxdse-stream-{k}") for k, s in enumerate(self.streams)]
         for t in threads:
             t.start()
+        if self.view is not None:
+            host, port = self.view.start()
+            self.log(f"live view on http://{host}:{port}/")
         if self.publisher is not None:
             host, port = self.publisher.start()
             self.log(f"publishing on tcp {host}:{port} (IDCODE {self.publisher.idcode}, one station per unit)")
@@ -555,6 +576,8 @@ class Monitor:
                 self._jsonl.close()
             if self.publisher is not None:
                 self.publisher.stop()
+            if self.view is not None:
+                self.view.stop()
         return self._finish(time.monotonic() - t0)
 
     def _handle(self, item):
@@ -571,6 +594,14 @@ class Monitor:
             s.counts["disconnects"] += 1
         elif kind == "up" and s.counts["disconnects"]:
             self.log(f"stream {k}: reconnected to {x}")
+
+    def _status(self) -> dict:
+        """The streams' counts and the recent delay, for the live view (its thread)."""
+        recent = np.asarray(self.delays[-2000:])
+        return {"streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts)}
+                            for s in self.streams],
+                "delay_s": None if recent.size == 0 else {"median": float(np.median(recent)),
+                                                          "p99": float(np.quantile(recent, 0.99))}}
 
     def _finish(self, wall_s: float) -> dict:
         d = np.asarray(self.delays)

@@ -1,0 +1,163 @@
+"""The monitor's live view: a local web page with each unit's H and its interval over time.
+
+``GET /`` is one self-contained page (no script or style from elsewhere) that asks for
+``/state.json`` every second and draws, per unit, H with its 95 % band over the last
+``HISTORY`` updates (dots coloured by the window's verdict; a grey gap where a window did not
+excite H), the latest value with its interval, D, the estimate's age and the alarm, and above
+them the streams' frames, missing and late frames, disconnects and the delay from a frame's
+timestamp to its estimate. The server binds 127.0.0.1 unless told otherwise and answers only
+those two paths.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from collections import deque
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+
+HISTORY = 600
+"""Updates kept per unit for the page (10 minutes at one a second)."""
+
+PAGE = """<!doctype html>
+<html lang="en"><head><meta charset="utf-8"><title>jaxdse monitor</title>
+<style>
+body{font-family:system-ui,sans-serif;margin:16px;color:#222;background:#fafafa}
+h1{font-size:20px;margin:0 0 4px}
+#status{font-size:13px;color:#555;margin-bottom:12px}
+.grid{display:grid;grid-template-columns:repeat(auto-fill,minmax(330px,1fr));gap:10px}
+.unit{background:#fff;border:1px solid #ddd;border-radius:6px;padding:8px}
+.unit.alarm{border:2px solid #c62828}
+.name{font-weight:600}
+.badge{display:inline-block;padding:1px 6px;border-radius:8px;color:#fff;font-size:12px;margin-left:6px}
+.v{font-size:13px;margin:2px 0}
+svg{width:100%;height:90px}
+.legend{font-size:12px;color:#555;margin:8px 0}
+</style></head><body>
+<h1>jaxdse monitor: inertia H per unit</h1>
+<div id="status">waiting for data...</div>
+<div class="legend">Each panel: H [s] (dots, coloured by the window's verdict) with its 95 % interval
+(band) over the last updates; grey ticks: windows that did not excite H (no value).
+<span class="badge" style="background:#2e7d32">identified</span>
+<span class="badge" style="background:#f9a825">weakly identified</span>
+<span class="badge" style="background:#9e9e9e">not excited</span>
+<span class="badge" style="background:#c62828">failed</span></div>
+<div class="grid" id="grid"></div>
+<script>
+const COLOURS={"identified":"#2e7d32","weakly identified":"#f9a825","not excited":"#9e9e9e","failed":"#c62828"};
+function fmt(x,d){return x===null||x===undefined||!isFinite(x)?"-":x.toFixed(d)}
+function utc(t){return new Date(t*1000).toISOString().replace("T"," ").slice(0,19)+" UTC"}
+function chart(h){
+  const W=320,Hh=90,pts=h.filter(p=>p.H!==null);
+  if(!h.length)return "<svg></svg>";
+  const t0=h[0].t,t1=Math.max(h[h.length-1].t,t0+1);
+  let lo=Infinity,hi=-Infinity;
+  for(const p of pts){lo=Math.min(lo,isFinite(p.lo)?p.lo:p.H);hi=Math.max(hi,isFinite(p.hi)?p.hi:p.H)}
+  if(!pts.length){lo=0;hi=1}
+  const pad=0.1*(hi-lo||1);lo-=pad;hi+=pad;
+  const X=t=>4+(W-8)*(t-t0)/(t1-t0),Y=v=>Hh-14-(Hh-20)*(v-lo)/(hi-lo);
+  let band="",top=[],bot=[];
+  for(const p of pts){if(isFinite(p.lo)&&isFinite(p.hi)){top.push(X(p.t)+","+Y(p.hi));bot.unshift(X(p.t)+","+Y(p.lo))}}
+  if(top.length)band=`<polygon points="${top.concat(bot).join(" ")}" fill="#90caf9" opacity="0.45"/>`;
+  let dots="";
+  for(const p of h){
+    if(p.H===null)dots+=`<line x1="${X(p.t)}" x2="${X(p.t)}" y1="${Hh-12}" y2="${Hh-6}" stroke="#bbb"/>`;
+    else dots+=`<circle cx="${X(p.t)}" cy="${Y(p.H)}" r="1.8" fill="${COLOURS[p.verdict]||"#000"}"/>`;
+  }
+  const axis=`<text x="2" y="10" font-size="10" fill="#555">${fmt(hi,2)} s</text>`+
+             `<text x="2" y="${Hh-16}" font-size="10" fill="#555">${fmt(lo,2)} s</text>`+
+             `<text x="${W-4}" y="${Hh-1}" font-size="10" fill="#555" text-anchor="end">${utc(t1).slice(11)}</text>`;
+  return `<svg viewBox="0 0 ${W} ${Hh}">${band}${dots}${axis}</svg>`;
+}
+async function tick(){
+  let s;
+  try{s=await (await fetch("state.json",{cache:"no-store"})).json()}catch(e){return}
+  const d=s.delay_s;
+  document.getElementById("status").textContent=
+    (s.t?utc(s.t)+" | ":"")+s.units.length+" unit(s) | "+s.streams.map(x=>`stream ${x.stream} ${x.host}:${x.port}: frames ${x.frames||0}, missing ${x.missing_frames||0}, late ${x.late_or_repeated||0}, disconnects ${x.disconnects||0}`).join("; ")+
+    (d?` | delay frame to estimate: median ${fmt(d.median,2)} s, 99 % ${fmt(d.p99,2)} s`:"");
+  document.getElementById("grid").innerHTML=s.units.map(u=>{
+    const l=u.latest||{},c=COLOURS[l.verdict]||"#555";
+    return `<div class="unit${l.alarm?" alarm":""}" data-unit="${u.unit}"><span class="name">${u.unit}</span>`+
+      `<span class="badge" style="background:${c}">${l.verdict||"waiting"}</span>${l.alarm?'<span class="badge" style="background:#c62828">H ALARM</span>':""}`+
+      `<div class="v">H <b>${fmt(l.H_s,2)} s</b> (95 %: ${l.H_ci95?fmt(l.H_ci95[0],2)+" - "+fmt(l.H_ci95[1],2):"-"} s), D ${fmt(l.D,3)}, `+
+      `age ${fmt(l.age_s,0)} s${l.H_s===null&&l.last_H_s!==null&&l.last_H_s!==undefined?", last identified "+fmt(l.last_H_s,2)+" s":""}</div>`+
+      chart(u.history)+"</div>"}).join("");
+}
+tick();setInterval(tick,1000);
+</script></body></html>
+"""
+
+
+class LiveView:
+    """Keeps each unit's recent updates and serves the page (see the module docstring)."""
+
+    def __init__(self, units: list[str], status, host: str = "127.0.0.1", port: int = 8050):
+        self.units = list(units)
+        self.status = status
+        """Called (from the server's thread) for the streams' counts and the delay: a dict."""
+        self.history = {u: deque(maxlen=HISTORY) for u in self.units}
+        self.latest = {}
+        self.lock = threading.Lock()
+        self.host, self.port = host, port
+        self.server = None
+        self.bound = None
+
+    def add(self, line: dict):
+        """One line of ``updates.jsonl``."""
+        with self.lock:
+            lo, hi = line["H_ci95"] or (None, None)
+            self.history.setdefault(line["unit"], deque(maxlen=HISTORY)).append(
+                {"t": line["t"], "H": line["H_s"], "lo": lo, "hi": hi, "verdict": line["verdict"]})
+            self.latest[line["unit"]] = line
+
+    def state(self) -> dict:
+        with self.lock:
+            units = [{"unit": u, "latest": self.latest.get(u), "history": list(h)} for u, h in self.history.items()]
+            t = max((x["t"] for x in self.latest.values()), default=None)
+        return {"t": t, "units": units, **self.status()}
+
+    def start(self):
+        view = self
+
+        class Handler(BaseHTTPRequestHandler):
+            def do_GET(self):
+                if self.path in ("/", "/index.html"):
+                    body, kind = PAGE.encode(), "text/html; charset=utf-8"
+                elif self.path.startswith("/state.json"):
+                    body = json.dumps(_finite(view.state()), allow_nan=False).encode()
+                    kind = "application/json"
+                else:
+                    self.send_error(404)
+                    return
+                self.send_response(200)
+                self.send_header("Content-Type", kind)
+                self.send_header("Content-Length", str(len(body)))
+                self.send_header("Cache-Control", "no-store")
+                self.end_headers()
+                self.wfile.write(body)
+
+            def log_message(self, *args):
+                pass
+
+        self.server = ThreadingHTTPServer((self.host, self.port), Handler)
+        self.server.daemon_threads = True
+        self.bound = self.server.server_address[:2]
+        threading.Thread(target=self.server.serve_forever, daemon=True, name="jaxdse-view").start()
+        return self.bound
+
+    def stop(self):
+        if self.server is not None:
+            self.server.shutdown()
+            self.server.server_close()
+
+
+def _finite(x):
+    """``x`` with every non-finite float as None (JSON has no NaN or infinity)."""
+    if isinstance(x, float):
+        return x if x == x and abs(x) != float("inf") else None
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    return x
