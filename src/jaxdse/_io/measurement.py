@@ -218,6 +218,9 @@ class MeasurementSpec:
     max_gap_s: float = 0.5
     on_long_gap: str = "split"
     min_segment_s: float = 30.0
+    screen_spikes: bool = True
+    """Mask spikes (the Hampel filter of step 5); off for a recording already screened, such as
+    the stream ``jaxdse monitor`` recorded as it used it."""
     csv_options: CsvOptions = CsvOptions()
     """How to read a CSV export (separator, decimal mark, missing-value words, rows to skip,
     units row); in TOML, these are keys of [measurement] itself (``delimiter = ";"``)."""
@@ -862,10 +865,13 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
     # Spikes in magnitude and (detrended) angle of each phasor; one in the voltage and the
     # current at once is a disturbance of the plant, not a measurement error.
     ok_v, ok_i = np.isfinite(v) & ~bad_v, np.isfinite(i) & ~bad_i
-    sv = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(vm[ok_v])) | \
-        _spikes(_unwrapped(v, ok_v), SPIKE_FLOOR["angle_rad"])
-    si = _spikes(np.where(ok_i, im, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(im[ok_i])) | \
-        _spikes(_unwrapped(i, ok_i), SPIKE_FLOOR["angle_rad"])
+    if spec.screen_spikes:
+        sv = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(vm[ok_v])) | \
+            _spikes(_unwrapped(v, ok_v), SPIKE_FLOOR["angle_rad"])
+        si = _spikes(np.where(ok_i, im, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(im[ok_i])) | \
+            _spikes(_unwrapped(i, ok_i), SPIKE_FLOOR["angle_rad"])
+    else:
+        sv = si = np.zeros(v.shape, bool)
     both = sv & si
     note("spikes", vname, sv & ~both)
     note("spikes", iname, si & ~both)
@@ -876,7 +882,7 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
         out_f = np.isfinite(f) & (np.abs(f - spec.f_nominal_hz) > MAX_FREQUENCY_SAMPLE_OFFSET_HZ)
         note("out_of_range", fname, out_f)
         f = np.where(out_f, np.nan, f)
-        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"])
+        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"]) if spec.screen_spikes else np.zeros(f.shape, bool)
         note("spikes", fname, sf)
         f = np.where(sf, np.nan, f)
     bad = bad_v | bad_i

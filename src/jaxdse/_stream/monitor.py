@@ -674,7 +674,7 @@ def replay_recording(path, out_dir: Path | None = None, log=None) -> list[dict]:
                          "stat": f"{u.name}/STAT"},
                 voltage_unit="pu", current_unit="pu", angle_unit="rad", time_unit="s", time_format=None,
                 timezone=None, frequency_unit="Hz", frequency_kind="absolute", v_base_kv=None,
-                current_direction="out_of_plant", frame_rate_hz=rate, on_long_gap="split",
+                current_direction="out_of_plant", frame_rate_hz=rate, on_long_gap="split", screen_spikes=False,
                 min_segment_s=0.0, csv_options=dataclasses.replace(u.run.measurement.csv_options, delimiter=","))
             try:
                 segments, _ = read_measurement(spec, u.run.plant.machine)
