@@ -215,8 +215,11 @@ def with_values(unit: DyrUnit, specs, values) -> DyrUnit:
 
 
 def _scale(spec: ParameterSpec, x0: float) -> float:
-    """What a relative change means for a parameter: its value, or its bound width at 0."""
-    return abs(x0) if abs(x0) > 1e-12 else (spec.upper - spec.lower)
+    """What a relative change means for a parameter: its value, or its bound width at 0 (or
+    within ``AT_BOUND`` of the span from 0: the fit's value of a parameter pressed onto a bound at
+    0 is ~1e-9 of the span, and relative to it the interval would vanish)."""
+    span = spec.upper - spec.lower
+    return abs(x0) if abs(x0) > AT_BOUND * span else span
 
 
 # --- residuals -------------------------------------------------------------------------------
