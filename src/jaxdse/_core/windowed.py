@@ -13,7 +13,8 @@ z^T z, sum z and the count). The estimate of the last ``window_s`` (:func:`windo
 is the solve of the sums over its blocks; its covariance is the Newey-West sandwich of the
 blocks' scores g_b = X_b^T z_b - X_b^T X_b theta (Bartlett weights over the
 ``ceil(hac_window_s / update_s)`` neighbouring blocks that the residual's autocorrelation
-reaches), so that the interval too comes from the sums alone: no sample is stored, and the
+reaches; with a small-sample correction for the number of blocks), so that the interval too
+comes from the sums alone: no sample is stored, and the
 cost per sample does not grow with the window.
 
 Where it differs from the batch fit (each is what a causal, fixed-memory fit allows):
@@ -44,6 +45,7 @@ from jaxtyping import Array
 from .drem import ObserverConfig
 from .front_end import StreamContext, front_end, next_context
 from .identify import (
+    Z95,
     Identified,
     IdentifySettings,
     _design_row,
@@ -220,6 +222,16 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     return blocks, new
 
 
+def _t975(dof):
+    """Student's t 97.5 % quantile for ``dof`` degrees of freedom (Cornish-Fisher expansion to
+    1/dof^3: within 1 % of the exact value at 3 degrees of freedom, 0.1 % from 5)."""
+    z = Z95
+    g1 = (z**3 + z) / 4.0
+    g2 = (5 * z**5 + 16 * z**3 + 3 * z) / 96.0
+    g3 = (3 * z**7 + 19 * z**5 + 17 * z**3 - 15 * z) / 384.0
+    return z + g1 / dof + g2 / dof**2 + g3 / dof**3
+
+
 def window_estimate(blocks: Blocks, present, plant: Plant, identify_settings: IdentifySettings,
                     window: WindowSettings, t_ref, t_m0) -> Identified:
     """The estimate of a window from its blocks, oldest first (``present``: [blocks] which of
@@ -244,6 +256,12 @@ def window_estimate(blocks: Blocks, present, plant: Plant, identify_settings: Id
         cross = g[lag:].T @ g[:-lag]
         meat = meat + (1.0 - lag / (lags + 1.0)) * (cross + cross.T)
     bread = solve_spd(info, jnp.eye(4, dtype=info.dtype))
+    # Few blocks: the meat is estimated from B block scores with 4 coefficients fitted; widen by
+    # B / (B - 4) and by Student's t over the normal quantile (B - 4 degrees of freedom), so that
+    # a short window's interval is not the large-sample one (x1.21 at 20 blocks, x1.06 at 60).
+    b = jnp.sum(w)
+    dof = jnp.maximum(b - 4.0, 1.0)
+    meat = meat * (b / dof) * (_t975(dof) / Z95) ** 2
     a2_without = jnp.stack([_fit_without(info, tot.rhs[0], j)[1] for j in (0, 3)])
     if s.spread_scales:
         spread, fits = refit_spread(theta[1], thetas[1:, 1], explained[0], explained[1:])
