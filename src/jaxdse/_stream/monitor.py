@@ -201,12 +201,14 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
     """One stream's thread: connect, ask for the configuration, read; reconnect with back-off."""
     backoff = 0.5
     while not stop.is_set():
+        up = False
         try:
             with PmuClient(spec.host, spec.port, spec.idcode, timeout=spec.timeout_s,
                            udp=spec.transport == "udp") as pmu:
                 out.put((k, "frame", pmu.config(c3.CFG2)))
                 pmu.start()
                 out.put((k, "up", f"{spec.host}:{spec.port}"))
+                up = True
                 backoff, last = 0.5, time.monotonic()
                 while not stop.is_set():
                     frames = pmu.poll(0.2)
@@ -226,7 +228,7 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
         except (OSError, ConnectionError, TimeoutError) as err:
             if stop.is_set():
                 break
-            out.put((k, "down", f"{err}"))
+            out.put((k, "down" if up else "refused", f"{err}"))
             log(f"stream {k} ({spec.host}:{spec.port}): {err or type(err).__name__}; reconnecting in "
                 f"{backoff:g} s")
             stop.wait(backoff)
@@ -281,7 +283,7 @@ def _layout(cfg: c3.ConfigFrame):
 
 COLUMNS = ("VM", "VA", "IM", "IA", "F", "STAT")
 COUNTS = ("frames", "missing_frames", "late_or_repeated", "off_grid", "reorder_overflow", "before_config",
-          "config_changes", "disconnects")
+          "config_changes", "disconnects", "connect_failures")
 """A unit's columns in a recording: |V| [pu], angle V [rad], |I| [pu], angle I [rad], f [Hz], STAT."""
 
 
@@ -483,12 +485,15 @@ class Monitor:
             self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view)
         self.processing = []     # seconds of the main thread per data frame (updates included)
 
-    def emit(self, updates: list[Update]):
+    def emit(self, updates: list[Update], timed: bool = True):
+        """Log, record, publish and show ``updates``; ``timed``: count their delay (not for the
+        last frames flushed at the stop, which waited for it)."""
         now = time.time()
         for u in updates:
             alarm = self._alarm(u)
             delay = now - u.t
-            self.delays.append(delay)
+            if timed:
+                self.delays.append(delay)
             self.updates += 1
             self.latest[u.unit] = u
             line = update_line(u, alarm, delay)
@@ -570,7 +575,7 @@ class Monitor:
                 except queue.Empty:
                     break
             for s in self.streams:
-                self.emit(s.release(everything=True))
+                self.emit(s.release(everything=True), timed=False)
                 s.close()
             if self._jsonl is not None:
                 self._jsonl.close()
@@ -592,7 +597,9 @@ class Monitor:
             s.decoder_counts = x
         elif kind == "down":
             s.counts["disconnects"] += 1
-        elif kind == "up" and s.counts["disconnects"]:
+        elif kind == "refused":
+            s.counts["connect_failures"] += 1
+        elif kind == "up" and s.counts["disconnects"] + s.counts["connect_failures"]:
             self.log(f"stream {k}: reconnected to {x}")
 
     def _status(self) -> dict:
