@@ -222,3 +222,24 @@ def test_results_are_published_and_shown(example, tmp_path):
         assert c3.Stat.from_word(st.stat).data_error == 0 and not c3.Stat.from_word(st.stat).trigger
         assert st.analogs[0] == pytest.approx(x["H_s"], rel=1e-6)          # float32 on the wire
         assert st.analogs[1] == pytest.approx(x["H_ci95"][0], rel=1e-6)
+
+
+def test_one_streams_failure_costs_its_units_only(example, tmp_path):
+    """Two streams (``tile = 2``: units unit1 and unit1~2, one per stream); the second stops
+    after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on."""
+    config, _, _ = example
+    source = pmu_sim.tile(pmu_sim.load_source(config), 2)
+    a = pmu_sim.PmuServer(source, port=0, speed=20.0)
+    b = pmu_sim.PmuServer(source, port=0, speed=20.0, duration=2.0)
+    with a.serve_in_thread() as (ha, pa), b.serve_in_thread() as (hb, pb):
+        (tmp_path / "m.toml").write_text(
+            f'fleet = "{config}"\nwindow_s = 10.0\ntile = 2\n'
+            f'[[stream]]\nhost = "{ha}"\nport = {pa}\nunits = ["unit1"]\n'
+            f'[[stream]]\nhost = "{hb}"\nport = {pb}\nunits = ["unit1~2"]\ntimeout_s = 1.0\n')
+        summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=lambda x: None).run(6.0)
+    ups = [json.loads(x) for x in (tmp_path / "o" / "updates.jsonl").read_text().splitlines()]
+    first = [u["t"] for u in ups if u["unit"] == "unit1"]
+    second = [u["t"] for u in ups if u["unit"] == "unit1~2"]
+    assert first and max(first) > max(second, default=0) + 10       # 20x: 10 s of stream time
+    s0, s1 = summary["streams"]
+    assert s0["disconnects"] == 0 and s1["disconnects"] + s1["connect_failures"] >= 1
