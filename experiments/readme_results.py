@@ -148,6 +148,7 @@ def block() -> str:
         o, n, c = mon["osl"], mon["npcc"], mon["capacity"]["rows"]
         keep = [r for r in c if r["keeps_up"]]
         wrong = sum(len(r["identified_more_than_10_percent_off_dyr"]) for r in mon["faults"]["runs"])
+        windows = {(o["unit"], o["t_s"]) for r in mon["faults"]["runs"] for o in r["identified_more_than_10_percent_off_dyr"]}
         ups = sum(r["updates"] for r in mon["faults"]["runs"])
         big = max(c, key=lambda r: (r["frames_per_s"], r["units"]))
         out.append(
@@ -160,7 +161,8 @@ def block() -> str:
             f"{n['named']}; the recording replayed by `jaxdse run`: H within "
             f"{max(o['replay']['largest_relative_difference_H'], n['replay']['largest_relative_difference_H']):.0e}"
             f" (relative); {len(mon['faults']['runs'])} runs with injected faults (window 20 s): `identified` more than "
-            f"10 % off the .dyr H in {wrong} of {ups} updates. Delay from a frame's "
+            f"10 % off the .dyr H in {wrong} of {ups} updates ({len(windows)} distinct window(s), the same in every run: "
+            "a 20 s window at the recording's start). Delay from a frame's "
             f"timestamp to its estimate (OSL, real time): median {o['delay_s']['median']:.2f} s, 99 % "
             f"{o['delay_s']['p99']:.2f} s. Capacity: {big['units']} units at {big['frames_per_s']} frames/s "
             f"{'keep' if big['keeps_up'] else 'do not keep'} up (processing {big['processing_ms_per_frame']['median']:.1f}"
