@@ -21,16 +21,13 @@ NumPy only: ``event_start``, ``windows``, ``oscillatory_modes`` (``dominant_mode
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import dataclasses
 import math
-import os
-import threading
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 WINDOW_NAMES = ("pre", "event", "post")
 """Window names, in time order."""
@@ -216,69 +213,6 @@ MAX_OSCILLATION_DAMPING = 0.3
 37 % and has decayed by e within half a period (e.g. the slow recovery after a step)."""
 
 
-_BLAS_LOCK = threading.Lock()
-_BLAS_STATE = {"depth": 0, "saved": [], "libs": None}
-_OPENBLAS_SYMBOLS = (("openblas_get_num_threads", "openblas_set_num_threads"),
-                     ("openblas_get_num_threads64_", "openblas_set_num_threads64_"),
-                     ("scipy_openblas_get_num_threads64_", "scipy_openblas_set_num_threads64_"),
-                     ("scipy_openblas_get_num_threads", "scipy_openblas_set_num_threads"))
-
-
-def _openblas_libs() -> list:
-    """(get, set) thread-count functions of the OpenBLAS libraries loaded in this process
-    (numpy's among them), found in /proc/self/maps; empty elsewhere (no effect)."""
-    out = []
-    try:
-        with open("/proc/self/maps") as fh:
-            paths = {f[5].strip() for f in (line.split(None, 5) for line in fh) if len(f) == 6}
-    except OSError:
-        return out
-    for path in sorted(x for x in paths if "openblas" in os.path.basename(x).lower()):
-        try:
-            lib = ctypes.CDLL(path)
-        except OSError:
-            continue
-        for get, set_ in _OPENBLAS_SYMBOLS:
-            if hasattr(lib, get) and hasattr(lib, set_):
-                getf, setf = getattr(lib, get), getattr(lib, set_)
-                getf.restype, getf.argtypes = ctypes.c_int, []
-                setf.restype, setf.argtypes = None, [ctypes.c_int]
-                out.append((getf, setf))
-                break
-    return out
-
-
-@contextlib.contextmanager
-def _one_blas_thread():
-    """OpenBLAS (numpy's) on one thread inside, its thread count restored on the way out: the
-    matrix pencil's matrices are small (about 200 x 100 for a 10 s window at 30 frames/s) and
-    OpenBLAS's threads cost more than they give there. On 2 busy cores (XLA's thread pool,
-    another process) one SVD took 20-70 ms instead of 2 ms: 0.87 s per unit of ``jaxdse
-    fleet``'s window criteria, 0.04 s on one thread. The same LAPACK routines run: the modes
-    came out bit for bit the same (16 ACTIVSg2000 units, fleet.json identical). No effect
-    where no OpenBLAS is found (another BLAS, no /proc)."""
-    with _BLAS_LOCK:
-        st = _BLAS_STATE
-        if st["depth"] == 0:
-            if st["libs"] is None:
-                try:
-                    st["libs"] = _openblas_libs()
-                except Exception:                      # noqa: BLE001 - only a speed-up
-                    st["libs"] = []
-            st["saved"] = [get() for get, _ in st["libs"]]
-            for _, set_ in st["libs"]:
-                set_(1)
-        st["depth"] += 1
-    try:
-        yield
-    finally:
-        with _BLAS_LOCK:
-            st["depth"] -= 1
-            if st["depth"] == 0:
-                for (_, set_), n in zip(st["libs"], st["saved"]):
-                    set_(n)
-
-
 def oscillatory_modes(t, y, detrend: str = "final", max_order: int = 20, max_samples: int = 600,
                       min_energy_fraction: float = 0.05, fmin_hz: float = 0.05) -> list[Mode]:
     """The oscillatory modes of a response, by the matrix pencil method, most energetic first.
@@ -321,7 +255,10 @@ def oscillatory_modes(t, y, detrend: str = "final", max_order: int = 20, max_sam
     n = y.size
     if n < 12:
         return []
-    with _one_blas_thread():
+    # One BLAS thread: the matrices are small (about 200 x 100 for a 10 s window at 30 frames/s)
+    # and OpenBLAS's threads cost more than they give; on 2 busy cores one SVD took 20-70 ms
+    # threaded against 2 ms (0.87 s per unit of jaxdse fleet's window criteria, 0.04 s now).
+    with threadpool_limits(limits=1, user_api="blas"):
         return _pencil_modes(y, n, dt, k, h, duration, max_order, min_energy_fraction, fmin_hz)
 
 
