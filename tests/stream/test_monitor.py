@@ -229,7 +229,7 @@ def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on."""
     config, _, _ = example
     source = pmu_sim.tile(pmu_sim.load_source(config), 2)
-    a = pmu_sim.PmuServer(source, port=0, speed=20.0)
+    a = pmu_sim.PmuServer(source, port=0, speed=20.0, loop=True)        # never ends by itself
     b = pmu_sim.PmuServer(source, port=0, speed=20.0, duration=2.0)
     with a.serve_in_thread() as (ha, pa), b.serve_in_thread() as (hb, pb):
         (tmp_path / "m.toml").write_text(
