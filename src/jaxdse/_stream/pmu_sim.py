@@ -429,6 +429,23 @@ class _Client:
         self.sent = self.dropped = 0
 
 
+async def answer_commands(reader, writer, answer):
+    """Read a TCP client's frames until it closes, writing ``answer(frame)``'s frames back (a
+    PMU's command handling, 6.6); a connection error ends it quietly."""
+    decoder = c3.StreamDecoder(max_streams=4)
+    try:
+        while True:
+            data = await reader.read(READ_CHUNK)
+            if not data:
+                break
+            for frame in decoder.feed(data):
+                for out in answer(frame):
+                    writer.write(out)
+            await writer.drain()
+    except (ConnectionError, OSError):
+        pass
+
+
 class PmuServer:
     """Serves a :class:`Source` as one C37.118.2 stream (see the module docstring).
 
@@ -525,18 +542,8 @@ class PmuServer:
             return
         client = _Client(writer=writer)
         self.clients.append(client)
-        decoder = c3.StreamDecoder(max_streams=4)
         try:
-            while True:
-                data = await reader.read(READ_CHUNK)
-                if not data:
-                    break
-                for frame in decoder.feed(data):
-                    for out in self._command(client, frame):
-                        writer.write(out)
-                await writer.drain()
-        except (ConnectionError, OSError):
-            pass
+            await answer_commands(reader, writer, lambda frame: self._command(client, frame))
         finally:
             if client in self.clients:
                 self.clients.remove(client)

@@ -26,7 +26,7 @@ import numpy as np
 
 from . import c37118 as c3
 from .online import Update
-from .pmu_sim import MAX_CLIENTS, READ_CHUNK, SEND_BUFFER_BYTES, _short_names
+from .pmu_sim import MAX_CLIENTS, SEND_BUFFER_BYTES, _Client, _short_names, answer_commands
 
 ANALOGS = ("H", "H_LO", "H_HI", "D", "AGE")
 ALARM_TRIGGER_REASON = 8
@@ -87,27 +87,17 @@ class Publisher:
         finally:
             server.close()
             for c in self.clients:
-                c[0].close()
+                c.writer.close()
             loop.close()
 
     async def _serve(self, reader, writer):
         if len(self.clients) >= MAX_CLIENTS:
             writer.close()
             return
-        client = [writer, False]
+        client = _Client(writer=writer)
         self.clients.append(client)
-        decoder = c3.StreamDecoder(max_streams=4)
         try:
-            while True:
-                data = await reader.read(READ_CHUNK)
-                if not data:
-                    break
-                for frame in decoder.feed(data):
-                    for out in self._command(client, frame):
-                        writer.write(out)
-                await writer.drain()
-        except (ConnectionError, OSError):
-            pass
+            await answer_commands(reader, writer, lambda frame: self._command(client, frame))
         finally:
             self.clients.remove(client)
             writer.close()
@@ -119,9 +109,9 @@ class Publisher:
         now = time.time()
         soc, frac = int(now), int((now % 1) * self.config.time_base)
         if frame.cmd == c3.CMD_ON:
-            client[1] = True
+            client.on = True
         elif frame.cmd == c3.CMD_OFF:
-            client[1] = False
+            client.on = False
         elif frame.cmd == c3.CMD_HEADER:
             return [c3.encode(c3.HeaderFrame(self.idcode, "jaxdse monitor: per unit H, its 95 % interval "
                                              "(H_LO, H_HI) [s], D [pu torque per rad/s] and the estimate's AGE "
@@ -166,11 +156,11 @@ class Publisher:
             self._loop.call_soon_threadsafe(self._send, data)
 
     def _send(self, data: bytes):
-        for writer, on in self.clients:
-            if not on:
+        for c in self.clients:
+            if not c.on:
                 continue
-            if writer.transport.get_write_buffer_size() > SEND_BUFFER_BYTES:
+            if c.writer.transport.get_write_buffer_size() > SEND_BUFFER_BYTES:
                 self.stats["dropped_slow_client"] += 1
                 continue
-            writer.write(data)
+            c.writer.write(data)
             self.stats["sent"] += 1
