@@ -33,6 +33,7 @@ from jaxdse._dyr.playback import (
     TerminalSeries,
     initial_operating_point,
     play_back,
+    quiet_frames,
     voltage_steps,
 )
 from jaxdse._dyr.unit import DyrUnit, UnitInputs
@@ -146,6 +147,40 @@ def test_initial_operating_point_is_relative_to_the_first_angle():
     u0, i_re, i_im = initial_operating_point(series_of(v0 * rot, i0 * rot), PlaybackSettings())
     np.testing.assert_allclose([u0.v_re_pu, u0.v_im_pu], [v0.real, v0.imag], atol=1e-14)
     np.testing.assert_allclose([i_re, i_im], [i0.real, i0.imag], atol=1e-14)
+
+
+def _noisy_flat(v_of_t, sd=3e-4, seed=1):
+    """|V| = v_of_t(TS) with complex Gaussian noise (relative sd per part), I for P 0.7, Q 0.25."""
+    rng = np.random.default_rng(seed)
+    v = v_of_t(TS) * np.exp(0.2j) * (1 + sd * (rng.standard_normal(N_FRAMES)
+                                               + 1j * rng.standard_normal(N_FRAMES)))
+    i = np.conj((0.7 + 0.25j) / v) * (1 + sd * rng.standard_normal(N_FRAMES))
+    return series_of(v, i)
+
+
+@pytest.mark.parametrize("kind", ["step", "ramp", "none", "clean step"])
+def test_the_initial_point_is_the_mean_of_the_quiet_stretch_before_the_event(kind):
+    # A switching step at 6 s, a ramp of 0.5 %/s from 4 s, no event, and the step without noise:
+    # the initial point averages every frame before the event, and none after it.
+    event = {"step": 6.0, "ramp": 4.0, "none": None, "clean step": 6.0}[kind]
+    shape = {"step": lambda t: 1.02 - 0.01 * (t >= 6.0 + 0.5 / FPS),
+             "ramp": lambda t: 1.02 + 0.005 * np.maximum(t - 4.0, 0.0),
+             "none": lambda t: np.full_like(t, 1.02),
+             "clean step": lambda t: 1.02 - 0.01 * (t >= 6.0 + 0.5 / FPS)}[kind]
+    series = _noisy_flat(shape, sd=0.0 if kind == "clean step" else 3e-4)
+    n = int(quiet_frames(series, PlaybackSettings()))
+    if event is None:
+        assert n == N_FRAMES
+    else:
+        end = int(event * FPS) + 1                     # frames up to the event's
+        # a ramp stands out of the noise only after a moment: at most 0.2 s of it (0.1 % of |V|)
+        late = 0.2 * FPS if kind == "ramp" else 0
+        assert end - 0.1 * FPS - 1 <= n <= end + late, (n, end)
+    u0, _, _ = initial_operating_point(series, PlaybackSettings())
+    want = np.mean(np.asarray(series.v_mag_pu)[:n])
+    np.testing.assert_allclose(float(jnp.hypot(u0.v_re_pu, u0.v_im_pu)), want, rtol=1e-12)
+    short = int(quiet_frames(series, PlaybackSettings(init_max_s=1.0)))
+    assert short == min(n, int(FPS) + 0)
 
 
 # The round trip: GENROU + SEXS + TGOV1 behind X_E = 0.15 pu from an infinite bus whose voltage

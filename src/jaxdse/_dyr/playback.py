@@ -33,7 +33,16 @@ class PlaybackSettings(eqx.Module):
     substeps: int = eqx.field(static=True, default=4)
     """Fixed steps per recording frame ("tsit5"): 4 at 60 frames/s is PSS/E's half-cycle step."""
     init_s: float = eqx.field(static=True, default=0.5)
-    """The initial steady state is the power flow averaged over this first stretch [s]."""
+    """The initial steady state is the power flow averaged over the quiet stretch before the
+    first event (:func:`quiet_frames`), at least this long [s]."""
+    init_max_s: float = eqx.field(static=True, default=60.0)
+    """... and at most this long [s]. A long average matters: with the voltage imposed, a
+    regulator with integral action runs open loop and integrates any offset between its reference
+    (the initial |V|) and the recording's mean |V|; an average over 0.5 s of noisy frames leaves
+    an offset that drifts Q by several % of MBASE within a minute."""
+    init_sigmas: float = eqx.field(static=True, default=6.0)
+    """The quiet stretch ends where a 0.1 s moving mean of |V|, P or Q leaves the first
+    ``init_s``'s mean by this many standard errors of the noise (or at the first voltage step)."""
     settle_s: float = eqx.field(static=True, default=1.0)
     """A voltage step within this first stretch [s] is a start-up artefact of the recording
     (a flat start, a re-initialised PMU): the frames before it are replaced by the first
@@ -89,12 +98,44 @@ class PlaybackResult(eqx.Module):
     """True when the solver reached the end with finite states."""
 
 
-def initial_operating_point(series: TerminalSeries, settings: PlaybackSettings):
-    """(UnitInputs at t0, I_re, I_im): |V| averaged over ``init_s`` at the first frame's angle,
-    and the current averaged over ``init_s`` relative to the voltage angle (a noise-robust power
-    flow)."""
+def quiet_frames(series: TerminalSeries, settings: PlaybackSettings):
+    """Frames before the first event, between ``init_s`` and ``init_max_s`` (traced: one program
+    for every recording). The event is the first voltage step (:func:`voltage_steps`) or the first
+    0.1 s moving mean of |V|, P or Q that leaves the mean of the first ``init_s`` by
+    ``init_sigmas`` standard errors; the noise is taken from the median second difference, which a
+    smooth event leaves alone. The moving mean's own frames are left out of the stretch."""
+    n = series.t_s.shape[0]
     dt = series.t_s[1] - series.t_s[0]
-    k = jnp.arange(series.t_s.shape[0]) < jnp.maximum(1.0, jnp.round(settings.init_s / dt))
+    n0 = jnp.clip(jnp.round(settings.init_s / dt), 1.0, n)
+    m = jnp.maximum(1.0, jnp.round(0.1 / dt))
+    j = jnp.arange(n)
+    rel = series.v_ang_rad - series.v_ang_rad[0]
+    c, s = jnp.cos(rel), jnp.sin(rel)
+    ip = series.i_re_pu * c + series.i_im_pu * s
+    iq = series.i_im_pu * c - series.i_re_pu * s
+    first = n
+
+    for x in (series.v_mag_pu, series.v_mag_pu * ip, series.v_mag_pu * iq):
+        base = jnp.sum(jnp.where(j < n0, x, 0.0)) / n0
+        sigma = 1.4826 * jnp.median(jnp.abs(jnp.diff(x, 2))) / jnp.sqrt(6.0)
+        cum = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(x - base)])
+        lag = jnp.maximum(j + 1 - m, 0).astype(int)
+        mean = (cum[j + 1] - cum[lag]) / (j + 1 - lag)  # trailing, up to m frames
+        tol = settings.init_sigmas * sigma * jnp.sqrt(1.0 / m + 1.0 / n0) \
+            + 1e-9 * (1.0 + jnp.abs(base))
+        off = (jnp.abs(mean) > tol) & (j >= n0)
+        first = jnp.minimum(first, jnp.min(jnp.where(off, j - m + 1, n)))
+    steps = voltage_steps(series, settings)
+    first = jnp.minimum(first, jnp.min(jnp.where(steps, jnp.arange(n - 1) + 1, n)))
+    return jnp.clip(first, n0, jnp.maximum(n0, jnp.round(settings.init_max_s / dt)))
+
+
+def initial_operating_point(series: TerminalSeries, settings: PlaybackSettings):
+    """(UnitInputs at t0, I_re, I_im): |V| averaged over the quiet stretch before the first event
+    (:func:`quiet_frames`) at the first frame's angle, and the current averaged over it relative
+    to the voltage angle (a noise-robust power flow, and the reference an integrating regulator
+    holds)."""
+    k = jnp.arange(series.t_s.shape[0]) < quiet_frames(series, settings)
     w = k / jnp.sum(k)
     th0 = series.v_ang_rad[0]
     rel = series.v_ang_rad - th0
@@ -230,4 +271,4 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
 
 
 __all__ = ["PlaybackResult", "PlaybackSettings", "TerminalSeries", "initial_operating_point",
-           "play_back", "steady_start", "voltage_steps"]
+           "play_back", "quiet_frames", "steady_start", "voltage_steps"]
