@@ -153,7 +153,7 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     ('update_s = 1.0', "fleet"),
     ('fleet = "{run}"\nwindow_s = 0.5', "window_s"),
     ('fleet = "{run}"\n[stream]\ntransport = "sctp"', "stream.transport"),
-    ('fleet = "{run}"\n[stream]\nprotocol = "sttp"', "stream.protocol"),
+    ('fleet = "{run}"\n[stream]\nprotocol = "iec61850"', "stream.protocol"),
     ('fleet = "{run}"\n[stream]\nport = 1\nspeed = 2', "stream.speed"),
     ('fleet = "{run}"\n[stream.stations]\nnobody = "X"', "stream.stations.nobody"),
 ])

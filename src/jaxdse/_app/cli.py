@@ -316,7 +316,8 @@ examples:
 
 MONITOR_HELP = """\
 Live inertia monitoring: each unit's H and D, with their 95 % intervals, every update_s from
-the PMU streams an operator's PDC already receives (IEEE C37.118.2-2011, TCP or UDP).
+the PMU streams an operator's PDC already receives (IEEE C37.118.2-2011, TCP or UDP; or STTP,
+IEEE 2664, with the optional extra: pip install jaxdse[sttp]).
 
 MONITOR.toml:
   fleet = "fleet.toml"     # a fleet file or a run configuration: the plants, their bases and
@@ -325,13 +326,15 @@ MONITOR.toml:
   window_s = 120.0         # ... fitted on the last window_s seconds (first one after window_s)
   [[stream]]               # one per PMU or PDC (or a single [stream] table)
   host = "127.0.0.1"
-  port = 4712
+  port = 4712              # (STTP: 7165 by default)
+  protocol = "c37.118"     # or "sttp": subscribe to an STTP publisher (TCP)
   idcode = 1
-  transport = "tcp"        # or "udp"
+  transport = "tcp"        # or "udp" (C37.118 only)
   reorder_s = 0.2          # frames held this long for late ones
   timeout_s = 5.0          # a silent connection is made again (back-off 0.5 s to 10 s)
   current_direction = "out_of_plant"
   frequency = "stream"     # the stations' FREQ; "angle": derived from the voltage angle
+  frame_rate_hz = 0        # STTP: the reporting rate (0: the devices' FramesPerSecond)
   units = ["G1", "G2"]     # the units this stream carries (default: all, with one stream)
   [stream.stations]        # unit -> station name, where the name is not the unit's own
   G1 = "PMU_PLANT_A"
@@ -341,10 +344,20 @@ MONITOR.toml:
   [publish]                # the results as a C37.118 stream (a "virtual PMU") for a PDC
   port = 4713              # or a historian: per unit the analogs H, H_LO, H_HI, D, AGE;
   idcode = 7734            # STAT 01 not excited, 11 failed, trigger bit: H alarm
+  protocol = "c37.118"     # or "sttp": an STTP publisher (port 7166 by default) of the point
+                           # tags UNIT:H, UNIT:H_LO, UNIT:H_HI, UNIT:D, UNIT:AGE, UNIT:STATE
+                           # (0 identified, 1 weakly, 2 not excited, 3 failed), UNIT:ALARM
   [view]                   # a live web page: H with its interval over time per unit
   port = 8050
   (tile = K repeats the units K times, named as `jaxdse pmu-sim --tile K` names them:
    capacity tests.)
+
+STTP input: per station (the unit's name or its [stream.stations] name) the point tags
+STATION:V1_MAG, STATION:V1_ANG, STATION:I1_MAG, STATION:I1_ANG (angles in degrees, magnitudes in
+the units `jaxdse pmu-sim` serves: V and A where the fleet gives v_base_kv, else pu), and
+optionally STATION:FREQ [Hz] and STATION:STAT (the C37.118 STAT word); points are grouped into
+frames by timestamp on the reporting grid (within 1 ms), and STTP's bad-quality flags make a
+sample unusable.
 
 Per unit, the online identification runs chunk by chunk on the stream (the regression of
 `jaxdse run`'s [identify], its sums kept per update_s: the cost per frame does not grow with
@@ -592,7 +605,7 @@ def build_parser() -> argparse.ArgumentParser:
     ps.add_argument("--fault", action="append", metavar="SPEC",
                     help="inject a fault, KIND[=VALUE]@START[+DURATION][:STATION] (see above)")
     ps.set_defaults(func=_pmu_sim)
-    mo = sub.add_parser("monitor", help="per-unit H and D every second from live PMU streams (C37.118)",
+    mo = sub.add_parser("monitor", help="per-unit H and D every second from live PMU streams (C37.118, STTP)",
                         description=MONITOR_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     mo.add_argument("config", metavar="MONITOR.toml", help="the monitor file (see above)")
     mo.add_argument("--out", metavar="DIR", default=None,

@@ -1,4 +1,6 @@
-"""``jaxdse monitor``: per-unit H and D, with their intervals, from live C37.118.2 streams.
+"""``jaxdse monitor``: per-unit H and D, with their intervals, from live C37.118.2 streams (or
+STTP, IEEE 2664, with the optional extra ``jaxdse[sttp]``: :mod:`.sttp` turns its measurements
+into the same frames).
 
 The monitor file (TOML) names the plants (``fleet``: a fleet file or a run configuration, whose
 units and measurement bases it takes) and the streams (``[[stream]]``: a PMU or a PDC each,
@@ -79,6 +81,8 @@ class StreamSpec:
     frames/s moved H by +1 % on NASPI OSL case 1)."""
     stations: tuple[tuple[str, str], ...] = ()
     """(unit, station name) pairs; units not named are found by their name's first 16 characters."""
+    frame_rate_hz: float = 0.0
+    """STTP only: the reporting rate; 0: the stations' FramesPerSecond in the publisher's metadata."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -108,7 +112,7 @@ class MonitorConfig:
 
 STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
 TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish", "view"}
-PUBLISH_KEYS = {"host", "port", "idcode"}
+PUBLISH_KEYS = {"protocol", "host", "port", "idcode"}
 
 
 def load_monitor(path) -> MonitorConfig:
@@ -129,8 +133,18 @@ def load_monitor(path) -> MonitorConfig:
     if "publish" in data:
         pub = subtable(path, data, "publish", "publish")
         no_unknown(path, pub, PUBLISH_KEYS, "publish.")
-        publish = {"host": typed_value(path, str, pub.get("host", "127.0.0.1"), "publish.host"),
-                   "port": typed_value(path, int, pub.get("port", 4713), "publish.port", 0),
+        protocol = typed_value(path, str, pub.get("protocol", "c37.118"), "publish.protocol")
+        if protocol not in ("c37.118", "sttp"):
+            raise InputError(path, f"must be \"c37.118\" or \"sttp\", got {protocol!r}",
+                             key="publish.protocol")
+        if protocol == "sttp":
+            from . import sttp
+
+            sttp.require(path, "publish.protocol")
+        default_port = 4713 if protocol == "c37.118" else sttp.PUBLISH_PORT
+        publish = {"protocol": protocol,
+                   "host": typed_value(path, str, pub.get("host", "127.0.0.1"), "publish.host"),
+                   "port": typed_value(path, int, pub.get("port", default_port), "publish.port", 0),
                    "idcode": typed_value(path, int, pub.get("idcode", 7734), "publish.idcode", 1)}
     no_unknown(path, alarm, {"h_below_s", "hysteresis"}, "alarm.")
     view = None
@@ -158,8 +172,15 @@ def load_monitor(path) -> MonitorConfig:
         if kw.get("protocol", "c37.118") not in ("c37.118", "sttp"):
             raise InputError(path, f"must be \"c37.118\" or \"sttp\", got {kw['protocol']!r}", key=key + "protocol")
         if kw.get("protocol") == "sttp":
-            raise InputError(path, "STTP (IEEE 2664) is not available in this version: use "
-                             'protocol = "c37.118"', key=key + "protocol")
+            from . import sttp
+
+            sttp.require(path, key + "protocol")
+            if kw.get("transport", "tcp") != "tcp":
+                raise InputError(path, "STTP is read over TCP", key=key + "transport")
+            kw.setdefault("port", sttp.DEFAULT_PORT)
+        elif "frame_rate_hz" in kw:
+            raise InputError(path, "is for STTP streams (C37.118 gives its rate in CFG-2)",
+                             key=key + "frame_rate_hz")
         if kw.get("transport", "tcp") not in ("tcp", "udp"):
             raise InputError(path, f"must be \"tcp\" or \"udp\", got {kw['transport']!r}", key=key + "transport")
         if kw.get("frequency", "stream") not in ("stream", "angle"):
@@ -473,11 +494,15 @@ class Monitor:
         self._next_report = None
         self.publisher = None
         if cfg.publish is not None:
-            from .publish import Publisher
+            opts = dict(cfg.publish)
+            if opts.pop("protocol", "c37.118") == "sttp":
+                from .sttp import SttpPublisher as Publisher
+            else:
+                from .publish import Publisher
 
             f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
             self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
-                                       log=self.log, **cfg.publish)
+                                       log=self.log, **opts)
         self.view = None
         if cfg.view is not None:
             from .view import LiveView
@@ -545,8 +570,14 @@ class Monitor:
         """Monitor until ``duration_s`` seconds pass (None: until interrupted); returns the summary."""
         q: queue.Queue = queue.Queue(maxsize=100_000)
         stop = threading.Event()
-        threads = [threading.Thread(target=_reader, args=(k, s.spec, q, stop, self.log), daemon=True,
-                                    name=f"jaxdse-stream-{k}") for k, s in enumerate(self.streams)]
+        threads = []
+        for k, s in enumerate(self.streams):
+            target, args = _reader, (k, s.spec, q, stop, self.log)
+            if s.spec.protocol == "sttp":
+                from .sttp import reader as target
+
+                args += ([given or full for given, full, _ in s.wanted],)
+            threads.append(threading.Thread(target=target, args=args, daemon=True, name=f"jaxdse-stream-{k}"))
         for t in threads:
             t.start()
         if self.view is not None:
@@ -554,7 +585,11 @@ class Monitor:
             self.log(f"live view on http://{host}:{port}/")
         if self.publisher is not None:
             host, port = self.publisher.start()
-            self.log(f"publishing on tcp {host}:{port} (IDCODE {self.publisher.idcode}, one station per unit)")
+            if (self.cfg.publish or {}).get("protocol") == "sttp":
+                self.log(f"publishing STTP on tcp {host}:{port} (point tags UNIT:H, UNIT:H_LO, ...)")
+            else:
+                self.log(f"publishing on tcp {host}:{port} (IDCODE {self.publisher.idcode}, one station per "
+                         "unit)")
         t0 = time.monotonic()
         try:
             while duration_s is None or time.monotonic() - t0 < duration_s:
