@@ -25,8 +25,9 @@ Applied at the edge, in NumPy, in this order:
    and the PMU voltage base against the machine's rated voltage for the declared location;
 5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, and
    spikes (a Hampel filter: deviation from a running median beyond ``SPIKE_SIGMAS`` robust
-   standard deviations, in runs of at most ``SPIKE_MAX_SAMPLES``) become missing; a spike in
-   the voltage and the current at the same sample is a disturbance and is kept;
+   standard deviations, in runs of at most ``SPIKE_MAX_SAMPLES`` that stand out from the curve
+   of their neighbours) become missing; a spike in one phasor with the other off its median
+   within a frame (a fault: the voltage dips, the current answers) is a disturbance and is kept;
 6. gaps: missing samples form gaps; gaps up to ``max_gap_s`` are bridged by linear
    interpolation of magnitude and unwrapped angle, longer ones split the recording (or fail);
 7. resampling onto a uniform grid (linear, angles unwrapped first).
@@ -159,6 +160,10 @@ SPIKE_FLOOR = {"magnitude": 0.02, "angle_rad": 0.05, "frequency_hz": 0.05}
 [rad] and frequency [Hz] (noise-free data have a zero MAD)."""
 SPIKE_MAX_SAMPLES = 3
 """Longest run of outlying samples that is a spike; longer runs are the signal (an event)."""
+SPIKE_TREND = 4.0
+"""A spike stands out from the line through the samples on either side of it by more than this
+many times the curvature there (the second difference, times the run's length plus one,
+squared): more than a smooth swing's crest does."""
 STAT_INVALID_BITS = 0xE000
 """C37.118 STAT bits that make a frame invalid: data error (bits 15-14) and PMU sync error (13)."""
 
@@ -793,23 +798,54 @@ def _runs(mask):
 
 
 def _spikes(x, floor):
-    """Samples of ``x`` that deviate from a running median by more than ``SPIKE_SIGMAS`` robust
-    standard deviations (and ``floor``), in runs of at most ``SPIKE_MAX_SAMPLES`` (Hampel)."""
+    """(moved, spikes) of ``x``.
+
+    Outliers deviate from a running median by more than ``SPIKE_SIGMAS`` robust standard
+    deviations (and ``floor``) (Hampel). Spikes are the runs of at most ``SPIKE_MAX_SAMPLES``
+    outliers that also stand out from the line through the samples on either side by
+    ``SPIKE_TREND`` times the curvature there: the crest of a swing sampled a few times per
+    period leaves an 11-sample median far behind (a 1.75 Hz swing at 30 frames/s), but not the
+    curve its neighbours draw. ``moved`` marks the outliers and both samples of a jump (a step
+    beyond ``SPIKE_SIGMAS`` times the running median of the sample-to-sample changes: a
+    switching event, which a running median of the values does not flag)."""
     from scipy.ndimage import median_filter
 
     fin = np.isfinite(x)
+    none = np.zeros(x.shape, bool)
     if fin.sum() < 2 * SPIKE_HALF_WIDTH + 1:
-        return np.zeros(x.shape, bool)
+        return none, none
     idx = np.arange(x.size)
     xf = x if fin.all() else np.where(fin, x, np.interp(idx, idx[fin], x[fin]))
     hw, size = SPIKE_HALF_WIDTH, 2 * SPIKE_HALF_WIDTH + 1
     med = median_filter(_extend(xf, hw), size=size, mode="nearest")[hw:-hw]
     dev = np.abs(xf - med)
     mad = median_filter(dev, size=size, mode="mirror")
-    out = fin & (dev > np.maximum(SPIKE_SIGMAS * 1.4826 * mad, floor))
-    for a, b in zip(*_runs(out)):
+    outliers = fin & (dev > np.maximum(SPIKE_SIGMAS * 1.4826 * mad, floor))
+    spikes = outliers.copy()
+    n = x.size
+    for a, b in zip(*_runs(outliers)):
         if b - a > SPIKE_MAX_SAMPLES:
-            out[a:b] = False
+            spikes[a:b] = False
+        elif a >= 3 and b + 3 <= n:   # at the edges the Hampel test alone decides
+            lo, hi = xf[a - 1], xf[b]
+            line = lo + (hi - lo) * (np.arange(a, b) - (a - 1)) / (b - a + 1)
+            curve = max(abs(xf[a - 1] - 2 * xf[a - 2] + xf[a - 3]),
+                        abs(xf[b] - 2 * xf[b + 1] + xf[b + 2]))
+            spikes[a:b] = np.max(np.abs(xf[a:b] - line)) > SPIKE_TREND * curve * (b - a + 1) ** 2
+    step = np.abs(np.diff(xf))
+    usual = median_filter(step, size=size, mode="nearest")
+    jump = fin[1:] & fin[:-1] & (step > SPIKE_SIGMAS * 1.4826 * usual)
+    moved = outliers.copy()
+    moved[1:] |= jump
+    moved[:-1] |= jump
+    return moved, spikes
+
+
+def _within_a_frame(mask):
+    """``mask`` widened by one sample on each side."""
+    out = mask.copy()
+    out[1:] |= mask[:-1]
+    out[:-1] |= mask[1:]
     return out
 
 
@@ -866,13 +902,18 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
     # current at once is a disturbance of the plant, not a measurement error.
     ok_v, ok_i = np.isfinite(v) & ~bad_v, np.isfinite(i) & ~bad_i
     if spec.screen_spikes:
-        sv = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(vm[ok_v])) | \
+        (ov, sv), (ova, sva) = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"]
+                                       * np.nanmedian(vm[ok_v])), \
             _spikes(_unwrapped(v, ok_v), SPIKE_FLOOR["angle_rad"])
-        si = _spikes(np.where(ok_i, im, np.nan), SPIKE_FLOOR["magnitude"] * np.nanmedian(im[ok_i])) | \
+        (oi, si), (oia, sia) = _spikes(np.where(ok_i, im, np.nan), SPIKE_FLOOR["magnitude"]
+                                       * np.nanmedian(im[ok_i])), \
             _spikes(_unwrapped(i, ok_i), SPIKE_FLOOR["angle_rad"])
+        sv, si = sv | sva, si | sia
+        # the other phasor an outlier too, within a frame (any run length: a fault's current
+        # stays off after the voltage dip): a disturbance of the plant, kept
+        both = (sv & _within_a_frame(oi | oia)) | (si & _within_a_frame(ov | ova))
     else:
-        sv = si = np.zeros(v.shape, bool)
-    both = sv & si
+        sv = si = both = np.zeros(v.shape, bool)
     note("spikes", vname, sv & ~both)
     note("spikes", iname, si & ~both)
     bad_v |= sv & ~both
@@ -882,7 +923,7 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
         out_f = np.isfinite(f) & (np.abs(f - spec.f_nominal_hz) > MAX_FREQUENCY_SAMPLE_OFFSET_HZ)
         note("out_of_range", fname, out_f)
         f = np.where(out_f, np.nan, f)
-        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"]) if spec.screen_spikes else np.zeros(f.shape, bool)
+        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"])[1] if spec.screen_spikes else np.zeros(f.shape, bool)
         note("spikes", fname, sf)
         f = np.where(sf, np.nan, f)
     bad = bad_v | bad_i
