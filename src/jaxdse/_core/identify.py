@@ -89,7 +89,8 @@ class IdentifySettings(eqx.Module):
     """Static choices of :func:`identify` (never differentiated or vmapped)."""
 
     settle_s: float = eqx.field(static=True, default=1.0)
-    """Samples of the first ``settle_s`` [s] are left out (the filters start from rest)."""
+    """Samples of the first ``settle_s`` [s] after the first full derivative window
+    (``Settings.derivative_half_width``) are left out (the filters start from rest there)."""
     governor_smoothing_hz: float = eqx.field(static=True, default=2.0)
     """Cut-off [Hz] of the zero-phase low-pass of the speed that drives the governor model."""
     robust_iterations: int = eqx.field(static=True, default=10)
@@ -259,7 +260,8 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
         raise ValueError("identify_front: the bootstrap needs its draws' front ends (front_ends())")
     ts = recording.t_s
     dt = ts[1] - ts[0]
-    valid = fe.valid & (ts >= ts[0] + s.settle_s)
+    lead = max(settings.derivative_half_width, 1)      # the first sample with a full derivative window
+    valid = fe.valid & (ts >= ts[min(lead, ts.shape[0] - 1)] + s.settle_s)
     window = jnp.maximum(jnp.round(s.hac_window_s / dt), 1.0).astype(jnp.int32)
     smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
     poles = jnp.stack([config.lambda1, config.lambda2, config.lambda3])
@@ -267,7 +269,7 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     # The regression's inputs of the recording and of the bootstrap's draws, vmapped (one copy).
     every = jax.tree_util.tree_map(lambda x, *xs: jnp.concatenate([jnp.asarray(x)[None], *xs]), fe,
                                    *(() if draws is None else (draws.front_ends,)))
-    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt))(every)
+    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead))(every)
     signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
@@ -329,22 +331,33 @@ def _fit_without(normal, rhs, j: int):
                      jnp.where(keep, rhs, 0.0))
 
 
-def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt):
+def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int = 0):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
     Tm - Tm(0); and Tm(0) [pu].
 
     Without a frequency channel, f would be the smoothed derivative of theta: then the bus
     term is 0 and the rotor term is delta itself (x2 = d delta/dt, differentiated exactly by
     the filter; the smoothing would bias H by ~2 %).
+
+    The samples before ``lead`` (the derivative's half width: there x2 and a derived f are
+    one-sided differences) are held at their value at ``lead``, so that the filters and the
+    governor model start there, at rest, as the windowed fit's do at its first own sample. On
+    NASPI OSL case 1, whose first 4 frames are stale (every |V| steps by 2 % at 0.133 s), the
+    governor started from the edge's speed (-0.065 rad/s, 13 times the noise) and the filters
+    from the stale Te (0.018 pu off): a slow HYGOV transient that the governor correction took
+    (-45 %), and H of 4031_malin 5.6 % below the windowed fit's.
     """
-    x2 = filter_states(smoothing, fe.x2_meas)[:, 0]
+    def held(x):
+        return jnp.where(jnp.arange(x.shape[0]) < lead, x[lead], x)
+
+    x2 = filter_states(smoothing, held(fe.x2_meas))[:, 0]
     dw = filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
     t_m = governor_torque(plant.governor, dw, dt, t_ref)
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
-    bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (fe.f_hz - plant.machine.f_nominal_hz))
-    rotor = jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_ref)
+    bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (held(fe.f_hz) - plant.machine.f_nominal_hz))
+    rotor = held(jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_ref))
     one = jnp.ones_like(bus)
-    return jnp.stack([bus, rotor, t_m - fe.alg.t_e_pu, one, t_m - t_m[0]]), t_m[0]
+    return jnp.stack([bus, rotor, t_m - held(fe.alg.t_e_pu), one, t_m - t_m[0]]), t_m[0]
 
 
 def _regression(signals, discretisation):
