@@ -4,11 +4,11 @@
 
 * playback: 32 units of one structure (the npcc bench's GENROU/IEEEX1/TGOV1 machines, each of
   their three 70 s events at 60 frames/s, tiled to 32), one ``eqx.filter_vmap(jd.play_back)``
-  call, default settings (Tsit5, 4 steps per frame); wall time of a second call (compile
+  call, default settings (adaptive Tsit5 per frame); wall time of a second call (compile
   apart) per unit;
 * calibration: one unit (npcc B50_G1) with H, the exciter gain and the droop planted wrong,
-  ranked and calibrated on its three 70 s events jointly (``jd.rank`` + ``jd.calibrate``, 2
-  steps per frame in the fit), wall time of a second run (compile apart) and of the first.
+  ranked and calibrated on its three 70 s events jointly (``jd.rank`` + ``jd.calibrate``, the
+  first step half a frame in the fit), wall time of a second run (compile apart) and of the first.
 
 Writes ``dyr_playback`` into ``benchmarks/results.json``.
 """

@@ -18,8 +18,9 @@ by more than the noise without any event getting worse):
   the share of the joint fit's 95 % intervals that contain the truth, per parameter and over all.
 
 To keep the cost down the fit uses the first ``WINDOW_S`` seconds of each event (10 s before,
-15 s after the event) and 2 fixed steps per frame, for the fit and the costs that decide
-alike (``jaxdse validate`` uses [playback] substeps, 4, for both). Writes calibration.json and
+15 s after the event) and a first step of half a frame (``substeps`` 2; the step is adaptive),
+for the fit and the costs that decide alike (``jaxdse validate`` uses [playback] substeps, 4,
+for both). Writes calibration.json and
 calibration.md.
 """
 

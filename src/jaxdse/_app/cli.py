@@ -196,7 +196,7 @@ FLEET.toml (paths relative to it):
                  imposed as PSS/E PLBVFU1 does; a unit with another model plays back the
                  surrogate and its page says which record) | "surrogate" (3rd-order,
                  identified H and D; validates P/frequency only); solver = "tsit5" | "kvaerno5";
-                 substeps (4 per frame); ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
+                 substeps (first step 1/substeps of a frame; adaptive Tsit5, rtol 1e-7); ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
 
 DIR gets:
   DIR/report.html            fleet page: two results per unit, never merged: H's verdict and
@@ -422,8 +422,9 @@ CASE.toml: a fleet file's [case] is enough (paths relative to the file); a whole
 serves as it is (its other sections are not read):
   [case]       raw = "case.raw" (PSS/E rev 32-36), dyr = "case.dyr" (or a list of .dyr files,
                later records replacing earlier ones of the same machine and model)
-  [playback]   optional: solver = "tsit5" (fixed step, 1/(30 x substeps) s) | "kvaerno5",
-               substeps (4: PSS/E's half-cycle step), ke_zero = "psse" | "literal"
+  [playback]   optional: solver = "tsit5" (the check's held run and step: fixed step,
+               1/(30 x substeps) s) | "kvaerno5", substeps (4: PSS/E's half-cycle step),
+               ke_zero = "psse" | "literal"
 
 Prints a table (units by model chain, every unit that does not pass with its first reason,
 the counts). With --out DIR:

@@ -38,9 +38,10 @@ class PlaybackOptions:
     "surrogate" (the 3rd-order model with the identified H, D and estimated Ef: validates
     active power/frequency only)."""
     solver: Literal["tsit5", "kvaerno5"] = "tsit5"
-    """"tsit5" (explicit, fixed step) or "kvaerno5" (implicit, adaptive) for the .dyr model."""
+    """"tsit5" (explicit, adaptive per frame) or "kvaerno5" (implicit, adaptive) for the .dyr
+    model (:class:`~jaxdse.PlaybackSettings`)."""
     substeps: int = 4
-    """Fixed steps per recording frame ("tsit5")."""
+    """The first step of each frame is 1/substeps of it ("tsit5")."""
     ke_zero: Literal["psse", "literal"] = "psse"
     """A DC exciter's (IEEEX1, EXDC2, ESDC2A) KE = 0: PSS/E's self-excited rule (KE computed so that
     VR = VRMAX/10 initially) or literally 0 (as ANDES reads it)."""
