@@ -208,15 +208,20 @@ on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``as
 (demo)."""
 
 
-LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py", "demo",
-                 "tests/core/test_estimate.py", "tests/many/test_batch.py", "isone",
-                 "tests/models/test_governors.py", "tests/app/test_fleet.py", "tests/many/test_stream.py",
-                 "tests/core/test_events.py", "tests/core/test_drem.py", "tests/app/test_compiles.py",
-                 "tests/dyr/test_playback.py", "tests/models/test_exciters.py", "tests/app/test_window_replay.py",
-                 "tests/models/test_stabilisers.py", "tests/io/test_properties.py", "tests/core/test_lti.py",
-                 "tests/models/test_machines.py")
-"""Work units that took longest (``--durations=0`` summed per unit, 2 cores), in that order:
-run first."""
+LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py",
+                 "tests/stream/test_monitor.py", "demo", "tests/models/test_machines_new.py",
+                 "tests/core/test_estimate.py", "tests/stream/test_windowed.py",
+                 "tests/models/test_governors.py", "tests/app/test_fleet.py", "tests/core/test_events.py",
+                 "tests/models/test_stabilisers_pss2.py", "tests/many/test_stream.py",
+                 "tests/many/test_batch.py", "isone", "tests/models/test_exciters.py",
+                 "tests/app/test_compiles.py", "tests/core/test_drem.py",
+                 "tests/models/test_exciters_dc_st.py", "tests/app/test_window_replay.py",
+                 "tests/stream/test_sttp.py", "tests/dyr/test_playback.py",
+                 "tests/models/test_governors_new.py", "tests/models/test_exciters_ac.py",
+                 "tests/stream/test_pmu_sim.py", "tests/stream/test_c37118.py",
+                 "tests/models/test_stabilisers.py", "tests/core/test_lti.py")
+"""Work units that took longest (``--durations=0`` summed per unit, 2 cores, 2026-11-27), in
+that order: run first."""
 
 
 def pytest_collection_modifyitems(items):
