@@ -218,7 +218,10 @@ def block() -> str:
                 f"{rc['cold']['wall_s']:.0f} s cold, {rc['warm']['wall_s']:.0f} s warm (persistent "
                 f"cache; {rc['per_unit_s']['warm']:.2f} s per unit); {progs['playback']} playback "
                 f"programs for {rc['model_chains']} model chains, {progs['assessment']} of the "
-                f"assessment; {rc['played_back_with_own_records']} units played back with their own records.")
+                f"assessment; {rc['played_back_with_own_records']} units played back with their own records; "
+                f"the validation of these true models: pass {rc['validation']['pass']}, fail "
+                f"{rc['validation']['fail']} (median RMS error of Q "
+                f"{rc['median_rms_percent_mbase']['Q_t']:.2f} % of MBASE).")
         fs = tb.get("fleet_scaling")
         if fs:
             out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "
