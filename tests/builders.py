@@ -58,3 +58,18 @@ def write_pmu(path: Path, recording: jd.Recording, columns: dict | None = None, 
     cols.update(edits)
     jd.write_csv(path, cols)
     return cols
+
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def example_cut(directory: Path, rows: int) -> Path:
+    """The shipped example run configuration (``examples/csv_positive_sequence.toml``) on the
+    first ``rows`` rows of its CSV, written into ``directory``: the path of its run.toml."""
+    lines = (EXAMPLES / "data" / "pmu_positive_sequence.csv").read_text().splitlines()
+    (directory / "pmu.csv").write_text("\n".join(lines[: rows + 1]) + "\n")
+    text = (EXAMPLES / "csv_positive_sequence.toml").read_text()
+    cut = text.replace('file = "data/pmu_positive_sequence.csv"', f'file = "{directory / "pmu.csv"}"')
+    assert cut != text
+    (directory / "run.toml").write_text(cut)
+    return directory / "run.toml"

@@ -13,9 +13,11 @@ Every wait is bounded."""
 
 import json
 import math
+
 import jax
 import numpy as np
 import pytest
+from builders import example_cut
 
 from jaxdse._app.cli import main
 from jaxdse._core.windowed import WindowSettings
@@ -29,8 +31,6 @@ from jaxdse._stream.online import OnlineGroup
 
 jax.config.update("jax_enable_x64", True)
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
 H_TRUE = 6.18
 ROWS = 3000  # 120 s at 25 frames/s
 BASE = 1_700_000_000 * 25
@@ -39,14 +39,10 @@ BASE = 1_700_000_000 * 25
 @pytest.fixture(scope="module")
 def example(tmp_path_factory):
     """The example run configuration on its first 120 s: (config path, generator, recording)."""
-    d = tmp_path_factory.mktemp("mon")
-    lines = (ROOT / "examples" / "data" / "pmu_positive_sequence.csv").read_text().splitlines()
-    (d / "pmu.csv").write_text("\n".join(lines[: ROWS + 1]) + "\n")
-    (d / "run.toml").write_text(EXAMPLE.read_text().replace(
-        'file = "data/pmu_positive_sequence.csv"', f'file = "{d / "pmu.csv"}"'))
-    g = load_config(d / "run.toml").generators[0]
+    run = example_cut(tmp_path_factory.mktemp("mon"), ROWS)
+    g = load_config(run).generators[0]
     (_, rec), = read_measurement(g.measurement, g.plant.machine)[0]
-    return d / "run.toml", g, rec
+    return run, g, rec
 
 
 def _head(rec, n):

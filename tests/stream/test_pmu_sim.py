@@ -14,25 +14,20 @@ import time
 
 import numpy as np
 import pytest
+from builders import example_cut
 
 from jaxdse._stream import c37118 as c3
 from jaxdse._stream import pmu_sim
 
 ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
 ROWS = 1000  # 40 s at 25 frames/s
 
 
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     """The example run configuration on the first 40 s of its CSV: (config path, CSV columns)."""
-    d = tmp_path_factory.mktemp("pmu")
-    lines = (ROOT / "examples" / "data" / "pmu_positive_sequence.csv").read_text().splitlines()
-    (d / "pmu.csv").write_text("\n".join(lines[: ROWS + 1]) + "\n")
-    text = EXAMPLE.read_text().replace('file = "data/pmu_positive_sequence.csv"', f'file = "{d / "pmu.csv"}"')
-    assert str(d) in text
-    (d / "run.toml").write_text(text)
-    return d / "run.toml", np.loadtxt(d / "pmu.csv", delimiter=",", skiprows=1)
+    run = example_cut(tmp_path_factory.mktemp("pmu"), ROWS)
+    return run, np.loadtxt(run.parent / "pmu.csv", delimiter=",", skiprows=1)
 
 
 @pytest.fixture(scope="module")

@@ -22,6 +22,7 @@ import time
 import jax
 import numpy as np
 import pytest
+from builders import example_cut
 
 from jaxdse._app.cli import main
 from jaxdse._io.config import load_config
@@ -33,8 +34,6 @@ from jaxdse._stream.monitor import Monitor, load_monitor
 
 jax.config.update("jax_enable_x64", True)
 
-ROOT = __import__("pathlib").Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
 H_TRUE = 6.18
 ROWS = 1500  # 60 s at 25 frames/s
 
@@ -42,13 +41,9 @@ ROWS = 1500  # 60 s at 25 frames/s
 @pytest.fixture(scope="module")
 def example(tmp_path_factory):
     """The example run configuration on its first 60 s."""
-    d = tmp_path_factory.mktemp("sttp")
-    lines = (ROOT / "examples" / "data" / "pmu_positive_sequence.csv").read_text().splitlines()
-    (d / "pmu.csv").write_text("\n".join(lines[: ROWS + 1]) + "\n")
-    (d / "run.toml").write_text(EXAMPLE.read_text().replace(
-        'file = "data/pmu_positive_sequence.csv"', f'file = "{d / "pmu.csv"}"'))
-    load_config(d / "run.toml")
-    return d / "run.toml"
+    run = example_cut(tmp_path_factory.mktemp("sttp"), ROWS)
+    load_config(run)
+    return run
 
 
 @pytest.fixture

@@ -9,12 +9,12 @@ governor model starts from persists through the whole fit; and the same recordin
 first 4 frames stale (|V| and |I| 2 % low, as OSL case 1's first 4 frames are)."""
 
 import dataclasses
-from pathlib import Path
 
 import equinox as eqx
 import jax
 import numpy as np
 import pytest
+from builders import example_cut
 
 import jaxdse as jd
 from jaxdse._core.windowed import WindowSettings
@@ -25,8 +25,6 @@ from jaxdse._stream.online import OnlineGroup
 
 jax.config.update("jax_enable_x64", True)
 
-ROOT = Path(__file__).resolve().parents[2]
-EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
 ROWS = 3000  # 120 s at 25 frames/s
 OLS = jd.IdentifySettings(robust_iterations=0, noise_interval="sandwich")
 
@@ -34,12 +32,7 @@ OLS = jd.IdentifySettings(robust_iterations=0, noise_interval="sandwich")
 @pytest.fixture(scope="module")
 def hydro(tmp_path_factory):
     """The example's generator with a slow HYGOV, and its first 120 s."""
-    d = tmp_path_factory.mktemp("win")
-    lines = (ROOT / "examples" / "data" / "pmu_positive_sequence.csv").read_text().splitlines()
-    (d / "pmu.csv").write_text("\n".join(lines[: ROWS + 1]) + "\n")
-    (d / "run.toml").write_text(EXAMPLE.read_text().replace(
-        'file = "data/pmu_positive_sequence.csv"', f'file = "{d / "pmu.csv"}"'))
-    g = load_config(d / "run.toml").generators[0]
+    g = load_config(example_cut(tmp_path_factory.mktemp("win"), ROWS)).generators[0]
     (_, rec), = read_measurement(g.measurement, g.plant.machine)[0]
     gov = HYGOV(r_pu=0.05, r_temp_pu=0.075, tr_s=12.0, tf_s=0.5, tg_s=20.5, velm_pu_s=0.1, tw_s=15.0,
                 at_pu=1.5, q_nl_pu=0.08)
