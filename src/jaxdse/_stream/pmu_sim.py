@@ -446,6 +446,24 @@ async def answer_commands(reader, writer, answer):
         pass
 
 
+async def serve_client(clients: list, reader, writer, command) -> bool:
+    """One TCP client of a server that takes at most ``MAX_CLIENTS``: listed in ``clients`` while
+    connected, its commands answered by ``command(client, frame)``. False (the connection closed
+    at once) when the server is full."""
+    if len(clients) >= MAX_CLIENTS:
+        writer.close()
+        return False
+    client = _Client(writer=writer)
+    clients.append(client)
+    try:
+        await answer_commands(reader, writer, lambda frame: command(client, frame))
+    finally:
+        if client in clients:
+            clients.remove(client)
+        writer.close()
+    return True
+
+
 class PmuServer:
     """Serves a :class:`Source` as one C37.118.2 stream (see the module docstring).
 
@@ -536,18 +554,8 @@ class PmuServer:
         return []
 
     async def _serve_tcp(self, reader, writer):
-        if len(self.clients) >= MAX_CLIENTS:
+        if not await serve_client(self.clients, reader, writer, self._command):
             self.stats["refused_clients"] += 1
-            writer.close()
-            return
-        client = _Client(writer=writer)
-        self.clients.append(client)
-        try:
-            await answer_commands(reader, writer, lambda frame: self._command(client, frame))
-        finally:
-            if client in self.clients:
-                self.clients.remove(client)
-            writer.close()
 
     class _Udp(asyncio.DatagramProtocol):
         def __init__(self, server):

@@ -26,12 +26,19 @@ import numpy as np
 
 from . import c37118 as c3
 from .online import Update
-from .pmu_sim import MAX_CLIENTS, SEND_BUFFER_BYTES, _Client, _short_names, answer_commands
+from .pmu_sim import SEND_BUFFER_BYTES, _short_names, serve_client
 
 ANALOGS = ("H", "H_LO", "H_HI", "D", "AGE")
 ALARM_TRIGGER_REASON = 8
 DATA_ERROR = {"identified": c3.GOOD, "weakly identified": c3.GOOD, "not excited": c3.PMU_ERROR_NO_INFO,
               "failed": c3.PMU_ERROR}
+
+
+def published_values(u: Update) -> list:
+    """The values of ``ANALOGS`` for update ``u`` (None where the window named no H)."""
+    if u.h_s is None:
+        return [None] * len(ANALOGS)
+    return [u.h_s, *(u.h_ci95 or (None, None)), u.d_pu_s, u.age_s]
 
 
 class Publisher:
@@ -91,16 +98,7 @@ class Publisher:
             loop.close()
 
     async def _serve(self, reader, writer):
-        if len(self.clients) >= MAX_CLIENTS:
-            writer.close()
-            return
-        client = _Client(writer=writer)
-        self.clients.append(client)
-        try:
-            await answer_commands(reader, writer, lambda frame: self._command(client, frame))
-        finally:
-            self.clients.remove(client)
-            writer.close()
+        await serve_client(self.clients, reader, writer, self._command)
 
     def _command(self, client, frame) -> list[bytes]:
         if not isinstance(frame, c3.CommandFrame) or frame.idcode != self.idcode:
@@ -137,8 +135,7 @@ class Publisher:
             k = self.index.get(u.unit)
             if k is None:
                 continue
-            named = u.h_s is not None
-            values = [u.h_s, *(u.h_ci95 or (None, None)), u.d_pu_s, u.age_s] if named else [None] * 5
+            values = published_values(u)
             alarm = bool(alarms.get(u.unit, False))
             stat = c3.Stat(data_error=DATA_ERROR[u.verdict], trigger=alarm,
                            trigger_reason=ALARM_TRIGGER_REASON if alarm else 0).word

@@ -68,6 +68,7 @@ import numpy as np
 
 from .._io.errors import InputError
 from . import c37118 as c3
+from .publish import published_values
 
 DEFAULT_PORT = 7165
 """The input's default port (a [[stream]] with protocol = "sttp" and no port)."""
@@ -316,8 +317,7 @@ class SttpPublisher:
             ids = self.ids.get(u.unit)
             if ids is None:
                 continue
-            named = u.h_s is not None
-            values = [u.h_s, *(u.h_ci95 or (None, None)), u.d_pu_s, u.age_s] if named else [None] * 5
+            values = published_values(u)
             alarm = bool(alarms.get(u.unit, False))
             flags = CALCULATED | {"identified": 0, "weakly identified": SUSPECTDATA, "not excited": BADDATA,
                                   "failed": BADDATA | CALCULATIONERROR}[u.verdict]
