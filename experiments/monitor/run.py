@@ -187,21 +187,28 @@ def verdicts(updates) -> dict:
     return out
 
 
+def end_to_end(s, folder, batch, reference, reference_key):
+    """A real-time part's summary: its updates against the batch intervals and a reference H."""
+    ups = s["updates_list"]
+    per = against_batch(ups, batch)
+    return per, {
+        "units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
+        "timing": timing(ups, 60.0, first_frame_time(folder)),
+        "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
+        "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
+        reference_key: sum(1 for u in ups if u["H_s"] is not None
+                           and u["H_ci95"][0] <= reference[u["unit"]] <= u["H_ci95"][1]),
+        "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
+        "replay": replay_difference(folder, ups), "streams": s["streams"]}
+
+
 def part_osl(work):
     plants = json.loads((ROOT / "experiments" / "naspi_osl_case1" / "results.json").read_text())["plants"]
     batch = {p["name"]: p["H_ci95"] for p in plants}
     dyr = {p["name"]: p["H_reference_s"] for p in plants}
     s = run_part(OSL, work / "osl", 95.0, 60.0, screenshot_at=88.0)
-    ups = s["updates_list"]
-    per = against_batch(ups, batch)
-    return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
-            "timing": timing(ups, 60.0, first_frame_time(work / "osl")),
-            "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
-            "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
-            "dyr_in_interval": sum(1 for u in ups if u["H_s"] is not None
-                                   and u["H_ci95"][0] <= dyr[u["unit"]] <= u["H_ci95"][1]),
-            "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
-            "replay": replay_difference(work / "osl", ups), "streams": s["streams"], "log": s["log"]}
+    _, out = end_to_end(s, work / "osl", batch, dyr, "dyr_in_interval")
+    return {**out, "log": s["log"]}
 
 
 def part_npcc(work):
@@ -209,18 +216,10 @@ def part_npcc(work):
     batch = {r["unit"]: r["H_ci95"] for r in rows if r["case"] == "npcc" and r["event"] == "line_trip"}
     truth = {r["unit"]: r["H_reference_s"] for r in rows if r["case"] == "npcc" and r["event"] == "line_trip"}
     s = run_part(NPCC, work / "npcc", 75.0, 60.0)
-    ups = s["updates_list"]
-    per = against_batch(ups, batch)
+    per, out = end_to_end(s, work / "npcc", batch, truth, "truth_in_interval")
     for name, p in per.items():
         p["H_andes_s"] = truth[name]
-    return {"units": len(s["latest"]), "updates": len(ups), "verdicts": verdicts(ups),
-            "timing": timing(ups, 60.0, first_frame_time(work / "npcc")),
-            "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
-            "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
-            "truth_in_interval": sum(1 for u in ups if u["H_s"] is not None
-                                     and u["H_ci95"][0] <= truth[u["unit"]] <= u["H_ci95"][1]),
-            "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
-            "replay": replay_difference(work / "npcc", ups), "streams": s["streams"]}
+    return out
 
 
 def part_ambient(work):
