@@ -111,7 +111,7 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     config, _, _ = example
     source = pmu_sim.load_source(config)
     faults = [pmu_sim.Fault.parse(s) for s in (
-        "drop@20+0.4", "error@25+0.2", "crc@30+0.2", "late=0.05@35+0.2", "config-change=2@45", "drop@75+2")]
+        "drop@20+0.4", "error@25+0.2", "crc@30+0.2", "late=0.05@35+0.2", "stale@40+0.2", "config-change=2@45", "drop@75+2")]
     server = pmu_sim.PmuServer(source, port=0, speed=30.0, faults=faults)
     with server.serve_in_thread() as (host, port):
         (tmp_path / "mon.toml").write_text(
@@ -123,6 +123,7 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     assert live and summary["updates"] == len(live)
     st = summary["streams"][0]
     assert st["config_changes"] == 1 and st["missing_frames"] >= 50 + 10
+    assert list(st["stale_samples"].values()) == [5]      # 40.0-40.16 s repeat the 39.96 s frame
     # The estimators restart at the configuration change (a new part of the recording) and at
     # the long gap (a new segment): each time, no update until the window is full again.
     import tomllib

@@ -85,6 +85,7 @@ def test_every_fault_shows_as_the_standard_says(source):
     faults = [
         pmu_sim.Fault.parse(s)
         for s in (
+            "stale@0.2+0.08",
             "error@0.4+0.2",
             "sync@0.8",
             "trigger=4@0.88",
@@ -129,6 +130,11 @@ def test_every_fault_shows_as_the_standard_says(source):
     def stat(t):
         return c3.Stat.from_word(by_t[t][0].stations[0].stat)
 
+    def phasors(t):
+        return by_t[t][0].stations[0].phasors
+
+    assert all(np.array_equal(phasors(0.16), phasors(t)) for t in (0.2, 0.24))   # stale: held
+    assert not np.array_equal(phasors(0.16), phasors(0.28)) and stat(0.2) == c3.Stat()
     assert stat(0.0) == c3.Stat() and all(stat(t).data_error == c3.PMU_ERROR for t in (0.4, 0.44, 0.56))
     assert stat(0.6).data_error == 0 and stat(0.8).sync_lost and not stat(0.84).sync_lost
     assert stat(0.88).trigger and stat(0.88).trigger_reason == 4 and stat(0.96).time_quality == 5

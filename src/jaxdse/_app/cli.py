@@ -298,6 +298,8 @@ without :STATION, every station.
   clock[=0-15]                        message time quality in FRACSEC (default 15, clock failure)
   drop                                frames not sent
   late=SECONDS                        frames sent SECONDS late (out of order)
+  stale                               the frame before START repeated (a PDC holding the last
+                                      value), timestamps and STAT running on
   crc                                 frames with a wrong CRC
   config-change[=LEAD]                STAT bit 10 for LEAD s (default 60), then a new
                                       configuration (phasors float <-> integer, CFGCNT + 1)

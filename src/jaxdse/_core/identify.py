@@ -342,10 +342,10 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
     The samples before ``lead`` (the derivative's half width: there x2 and a derived f are
     one-sided differences) are held at their value at ``lead``, so that the filters and the
     governor model start there, at rest, as the windowed fit's do at its first own sample. On
-    NASPI OSL case 1, whose first 4 frames are stale (every |V| steps by 2 % at 0.133 s), the
-    governor started from the edge's speed (-0.065 rad/s, 13 times the noise) and the filters
-    from the stale Te (0.018 pu off): a slow HYGOV transient that the governor correction took
-    (-45 %), and H of 4031_malin 5.6 % below the windowed fit's.
+    NASPI OSL case 1, before the readers masked its 4 stale opening frames (every |V| steps by
+    2 % at 0.133 s), the governor started from the edge's speed (-0.065 rad/s, 13 times the
+    noise) and the filters from the stale Te (0.018 pu off): a slow HYGOV transient that the
+    governor correction took (-45 %), and H of 4031_malin 5.6 % below the windowed fit's.
     """
     def held(x):
         return jnp.where(jnp.arange(x.shape[0]) < lead, x[lead], x)

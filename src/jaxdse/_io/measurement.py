@@ -23,8 +23,9 @@ Applied at the edge, in NumPy, in this order:
    fit the declared angle unit, the voltage-angle
    drift against f_nominal, the frame rate against f_nominal (without a frequency channel),
    and the PMU voltage base against the machine's rated voltage for the declared location;
-5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, and
-   spikes (a Hampel filter: deviation from a running median beyond ``SPIKE_SIGMAS`` robust
+5. screening: rows flagged invalid by the STAT word, samples outside physical ranges, stale
+   frames (every frame of a run that repeats exactly in all phasor channels, in data whose
+   frames otherwise change: ``REPEATS_RARE``), and spikes (a Hampel filter: deviation from a running median beyond ``SPIKE_SIGMAS`` robust
    standard deviations, in runs of at most ``SPIKE_MAX_SAMPLES`` that stand out from the curve
    of their neighbours) become missing; a spike in one phasor with the other off its median
    within a frame (a fault: the voltage dips, the current answers) is a disturbance and is kept;
@@ -164,6 +165,12 @@ SPIKE_TREND = 4.0
 """A spike stands out from the line through the samples on either side of it by more than this
 many times the curvature there (the second difference, times the run's length plus one,
 squared): more than a smooth swing's crest does."""
+REPEATS_RARE = 0.01
+"""A frame that repeats the one before it exactly, in every phasor channel, is a stale frame
+when repeats are this rare (a fraction of all pairs of valid frames) or rarer: noisy data
+change every frame, so a repeat is a PDC holding its last value, or a simulator's frames before
+its first solution (NASPI OSL case 1 opens with 4, |V| 2 % low). Noise-free or coarsely
+quantised data repeat by nature and keep their repeats."""
 STAT_INVALID_BITS = 0xE000
 """C37.118 STAT bits that make a frame invalid: data error (bits 15-14) and PMU sync error (13)."""
 
@@ -223,8 +230,8 @@ class MeasurementSpec:
     max_gap_s: float = 0.5
     on_long_gap: str = "split"
     min_segment_s: float = 30.0
-    screen_spikes: bool = True
-    """Mask spikes (the Hampel filter of step 5); off for a recording already screened, such as
+    screen_samples: bool = True
+    """Mask spikes and repeated frames (step 5); off for a recording already screened, such as
     the stream ``jaxdse monitor`` recorded as it used it."""
     csv_options: CsvOptions = CsvOptions()
     """How to read a CSV export (separator, decimal mark, missing-value words, rows to skip,
@@ -898,10 +905,16 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
         out_i = np.isfinite(im) & (im * scale > MAX_CURRENT_SAMPLE_PU_MACHINE)
         note("out_of_range", iname, out_i)
         bad_i |= out_i
+    ok_v, ok_i = np.isfinite(v) & ~bad_v, np.isfinite(i) & ~bad_i
+    stale = _stale(v, i, ok_v & ok_i) if spec.screen_samples else np.zeros(v.shape, bool)
+    note("stale_frames", f"{vname}, {iname}", stale)
+    bad_v |= stale
+    bad_i |= stale
+    ok_v &= ~stale
+    ok_i &= ~stale
     # Spikes in magnitude and (detrended) angle of each phasor; one in the voltage and the
     # current at once is a disturbance of the plant, not a measurement error.
-    ok_v, ok_i = np.isfinite(v) & ~bad_v, np.isfinite(i) & ~bad_i
-    if spec.screen_spikes:
+    if spec.screen_samples:
         (ov, sv), (ova, sva) = _spikes(np.where(ok_v, vm, np.nan), SPIKE_FLOOR["magnitude"]
                                        * np.nanmedian(vm[ok_v])), \
             _spikes(_unwrapped(v, ok_v), SPIKE_FLOOR["angle_rad"])
@@ -923,13 +936,27 @@ def _screen(v, i, f, t, raw, order, rows, spec: MeasurementSpec, machine, names,
         out_f = np.isfinite(f) & (np.abs(f - spec.f_nominal_hz) > MAX_FREQUENCY_SAMPLE_OFFSET_HZ)
         note("out_of_range", fname, out_f)
         f = np.where(out_f, np.nan, f)
-        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"])[1] if spec.screen_spikes else np.zeros(f.shape, bool)
+        f = np.where(stale, np.nan, f)
+        sf = _spikes(f, SPIKE_FLOOR["frequency_hz"])[1] if spec.screen_samples else np.zeros(f.shape, bool)
         note("spikes", fname, sf)
         f = np.where(sf, np.nan, f)
     bad = bad_v | bad_i
     report["masked_samples"] = int(bad.sum())
     q["screening"] = report
     return np.where(bad, np.nan, v), np.where(bad, np.nan, i), f
+
+
+def _stale(v, i, ok):
+    """Every frame of a run that repeats exactly in both phasors, when such repeats are rare
+    (``REPEATS_RARE``); all frames of the run, as which of them (if any) is genuine is unknown."""
+    same = ok[1:] & ok[:-1] & (v[1:] == v[:-1]) & (i[1:] == i[:-1])
+    out = np.zeros(v.shape, bool)
+    pairs = int(np.sum(ok[1:] & ok[:-1]))
+    if not same.any() or same.sum() > REPEATS_RARE * pairs:
+        return out
+    out[1:] |= same
+    out[:-1] |= same
+    return out
 
 
 def _unwrap(a):

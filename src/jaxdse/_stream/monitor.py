@@ -14,7 +14,9 @@ drops or stays silent, so one stream's failure costs its units only. The main th
 * maps each unit to its station (by name, or ``[stream.stations]``), converts its V1 and I1
   to per unit with the unit's own measurement bases (:func:`~.pmu_sim.served_units`) and
   screens it: a STAT data error (bits 15-14), lost sync (bit 13), NaN or a value outside the
-  file readers' physical ranges makes the sample unusable;
+  file readers' physical ranges makes the sample unusable, and so does a stale frame (both
+  phasors repeat the unit's previous sample exactly, after a second of samples that change
+  every frame but ``REPEATS_RARE`` of the time, as the file readers judge a whole recording);
 * feeds the units' samples to :class:`~.online.OnlineGroup` (bridging short gaps, restarting a
   unit's estimator after a long one) and writes each update as a line of ``updates.jsonl``;
 * on a new configuration (CFGCNT or the layout changed, STAT bit 10's announcement done), re-maps
@@ -43,7 +45,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._io.errors import InputError
-from .._io.measurement import MAX_CURRENT_SAMPLE_PU_MACHINE, VOLTAGE_RANGE_PU
+from .._io.measurement import MAX_CURRENT_SAMPLE_PU_MACHINE, REPEATS_RARE, VOLTAGE_RANGE_PU
 from .._io.schema import no_unknown, read_toml, subtable, typed_value
 from . import c37118 as c3
 from .online import OnlineGroup, Update
@@ -336,6 +338,14 @@ class _Stream:
         self.counts = defaultdict(int, {k: 0 for k in COUNTS})
         self.decoder_counts = {}
         self.unusable = np.zeros(len(units), np.int64)
+        self.stale = np.zeros(len(units), np.int64)
+        self._forget_samples()
+
+    def _forget_samples(self):
+        """Each unit's last sample and its history of repeats, from which a stale frame is told."""
+        n = len(self.units)
+        self.last_v, self.last_i = np.full(n, np.nan, complex), np.full(n, np.nan, complex)
+        self.pairs, self.repeats = np.zeros(n, np.int64), np.zeros(n, np.int64)
 
     # configuration
     def on_config(self, frame: c3.ConfigFrame) -> list[Update]:
@@ -346,6 +356,7 @@ class _Stream:
         self.config = frame
         names = [s.name for s in frame.stations]
         self.pos = np.full(len(self.units), -1)
+        self._forget_samples()
         missing = []
         for j, (given, full, short) in enumerate(self.wanted):
             for cand in (given,) if given else (full, short):
@@ -431,6 +442,7 @@ class _Stream:
         v, i, f, usable = screen(v, i, np.where(ok, np.asarray(a.freq, float)[p], np.nan), stat,
                                  self.machine_scale, self.f_nominal)
         self.unusable += ~usable & ok
+        usable = usable & ~self._stale(v, i, usable)
         if self.spec.frequency != "stream":
             f = np.full_like(f, np.nan)
         vm, va, im, ia = np.abs(v), np.angle(v), np.abs(i), np.angle(i)
@@ -447,6 +459,18 @@ class _Stream:
         for group, members in self.groups:
             out += group.push(idx, vm[members], va[members], im[members], ia[members], f[members], usable[members])
         return out
+
+    def _stale(self, v, i, usable):
+        """Samples that repeat the unit's previous one exactly in both phasors, where a second of
+        its samples changed every frame but ``REPEATS_RARE`` of the time (counted)."""
+        pair = usable & np.isfinite(self.last_v)
+        same = pair & (v == self.last_v) & (i == self.last_i)
+        stale = same & (self.pairs >= self.rate) & (self.repeats <= REPEATS_RARE * self.pairs)
+        self.pairs += pair
+        self.repeats += same
+        self.stale += stale
+        self.last_v, self.last_i = np.where(usable, v, np.nan), np.where(usable, i, np.nan)
+        return stale
 
     def _flush(self):
         """Write the rows held (%.17g: every float64 reads back exactly; NaN as nan)."""
@@ -654,7 +678,8 @@ class Monitor:
             "processing_ms_per_frame": _percentiles(1e3 * np.asarray(self.processing)),
             "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts),
                          "decoder_rejected": {k: v for k, v in s.decoder_counts.items() if v},
-                         "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n}}
+                         "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n},
+                         "stale_samples": {u.name: int(n) for u, n in zip(s.units, s.stale) if n}}
                         for s in self.streams],
             "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
@@ -716,7 +741,7 @@ def replay_recording(path, out_dir: Path | None = None, log=None) -> list[dict]:
                          "stat": f"{u.name}/STAT"},
                 voltage_unit="pu", current_unit="pu", angle_unit="rad", time_unit="s", time_format=None,
                 timezone=None, frequency_unit="Hz", frequency_kind="absolute", v_base_kv=None,
-                current_direction="out_of_plant", frame_rate_hz=rate, on_long_gap="split", screen_spikes=False,
+                current_direction="out_of_plant", frame_rate_hz=rate, on_long_gap="split", screen_samples=False,
                 min_segment_s=0.0, csv_options=dataclasses.replace(u.run.measurement.csv_options, delimiter=","))
             try:
                 segments, _ = read_measurement(spec, u.run.plant.machine)

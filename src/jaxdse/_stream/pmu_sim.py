@@ -30,7 +30,9 @@ seconds of stream time from the first frame): every STAT state (``error``, ``pmu
 ``test``, ``absent``, ``sync``, ``sorting``, ``trigger[=REASON]``, ``config-bit``,
 ``modified``, ``time-quality[=CODE]``, ``unlocked[=CODE]``), the message time quality
 (``clock[=CODE]``), dropped frames (``drop``), late frames (``late=SECONDS``: sent that much
-later than due, so out of order), a bad CRC (``crc``), a configuration change
+later than due, so out of order), stale frames (``stale``: the values of the frame before
+START repeated, with the timestamps and STAT running on, as a PDC that holds the last value
+of a PMU it lost), a bad CRC (``crc``), a configuration change
 (``config-change[=LEAD]``: STAT bit 10 for LEAD seconds, 60 by default, then a new
 configuration with the phasor format switched between float and integer and CFGCNT + 1) and
 a disconnect (``disconnect``: every client's connection closed).
@@ -370,7 +372,7 @@ STAT_FAULTS = {
 }
 """STAT fault -> (bits cleared, bits set); VALUE replaces the code of trigger (reason),
 time-quality and unlocked."""
-STREAM_FAULTS = ("clock", "drop", "late", "crc", "config-change", "disconnect")
+STREAM_FAULTS = ("clock", "drop", "late", "stale", "crc", "config-change", "disconnect")
 FAULTS = tuple(STAT_FAULTS) + STREAM_FAULTS
 
 
@@ -634,6 +636,13 @@ class PmuServer:
                             _absent(rec, j, self.configs[self.config_now].stations[j])
             elif f.kind == "clock":
                 tq = int(f.value if f.value is not None else 15)
+            elif f.kind == "stale":
+                held = self.records[self.config_now][max(k - round((t_stream - f.start_s) * self.source.rate) - 1, 0)]
+                for j, name in enumerate(names):
+                    if f.station in (None, name):
+                        for field in rec.dtype.names:
+                            if field.startswith(f"{j}") and field[len(str(j)):] in ("p", "a", "f", "d"):
+                                rec[field] = held[field]
             elif f.kind == "drop":
                 self.stats["dropped_by_fault"] += 1
                 return None, 0.0
