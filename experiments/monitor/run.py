@@ -8,9 +8,11 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
 
 * ``osl``: NASPI OSL contest case 1 (22 plants of the WECC 240 case, 90 s at 30 frames/s, a
   forced oscillation), in real time, ``window_s`` 60: per unit, every update that names an H
-  against the batch fleet run's interval (``experiments/naspi_osl_case1/results.json``), the
-  time of the first estimate and the spacing of the others; then the recording through
-  ``jaxdse run replay.toml``: the largest difference from the live updates;
+  against the batch fleet run's interval (``experiments/naspi_osl_case1/results.json``): its
+  point within it, its interval overlapping it; the time of the first estimate and the spacing
+  of the others; then the recording through ``jaxdse run replay.toml``: the largest difference
+  from the live updates; and replayed with an 87 s window, so that each unit's last update rests
+  on the samples of the batch run: its H against the batch interval;
 * ``npcc``: the ANDES npcc line trip (10 units, 70 s at 60 frames/s, the trip at 10 s), in real
   time, ``window_s`` 60: against ``experiments/andes_bench/fleet_results.json``'s batch
   intervals and ANDES's H; replay as above;
@@ -69,6 +71,7 @@ FAULTS = (
     ("sync@45+0.3", "STAT sync lost for 0.3 s"),
     ("time-quality@50+2", "STAT time quality 7 for 2 s (usable)"),
     ("trigger@52+1", "STAT trigger bit (usable)"),
+    ("stale@55+0.3", "the frame before 55 s repeated for 0.3 s (stale, bridged)"),
 )
 RESTARTING = (
     ("drop@30+2", "2 s of frames dropped (a long gap)"),
@@ -138,17 +141,48 @@ def run_part(fleet, out, seconds, window_s, *sim_args, tile=1, screenshot_at=Non
 
 
 def against_batch(updates, batch: dict) -> dict:
-    """Per unit: updates that name an H, and how many of them lie within the batch interval."""
+    """Per unit: updates that name an H, how many of them lie within the batch interval, and how
+    many have an interval that overlaps it."""
     per = {}
     for u in updates:
         if u["H_s"] is None:
             continue
         lo, hi = batch[u["unit"]]
-        p = per.setdefault(u["unit"], {"named": 0, "within_batch_interval": 0, "last_H_s": None})
+        p = per.setdefault(u["unit"], {"named": 0, "within_batch_interval": 0, "overlapping_batch_interval": 0,
+                                       "last_H_s": None})
         p["named"] += 1
         p["within_batch_interval"] += bool(lo <= u["H_s"] <= hi)
+        p["overlapping_batch_interval"] += bool(u["H_ci95"][0] <= hi and u["H_ci95"][1] >= lo)
         p["last_H_s"], p["last_ci95"], p["last_verdict"] = u["H_s"], u["H_ci95"], u["verdict"]
     return per
+
+
+def whole_recording(out: Path, batch: dict, updates, seconds: float) -> dict:
+    """The like-for-like check: the recorded stream replayed (``jd.replay_recording``, equal to
+    the live run) with a window as long as the recording (``seconds``, whole updates), so that
+    each unit's last update rests on the samples the batch run used. Per unit that the live run
+    identified: that update's H against the batch interval."""
+    import tomllib
+
+    live = out / "live"
+    text = (out / "monitor.toml").read_text()
+    long = out / "whole"
+    long.mkdir(exist_ok=True)
+    (long / "monitor.toml").write_text(re.sub(r"window_s = [\d.]+", f"window_s = {seconds:.1f}", text))
+    rp = (live / "replay.toml").read_text()
+    first = tomllib.loads(rp)["replay"]["part"][0]["file"]
+    (long / "replay.toml").write_text(rp.replace(str(out / "monitor.toml"), str(long / "monitor.toml"))
+                                      .replace(f'"{first}"', f'"{live / first}"'))
+    last = {}
+    for u in jd.replay_recording(long / "replay.toml"):
+        if u["H_s"] is not None:
+            last[u["unit"]] = u
+    identified = {u["unit"] for u in updates if u["verdict"] == "identified"}
+    rows = {name: {"H_s": u["H_s"], "H_ci95": u["H_ci95"], "verdict": u["verdict"], "batch_ci95": batch[name],
+                   "within": batch[name][0] <= u["H_s"] <= batch[name][1]}
+            for name, u in sorted(last.items()) if name in identified}
+    return {"window_s": seconds, "units": len(rows), "within_batch_interval": sum(r["within"] for r in rows.values()),
+            "per_unit": rows}
 
 
 def replay_difference(out: Path, live) -> dict:
@@ -196,6 +230,7 @@ def end_to_end(s, folder, batch, reference, reference_key):
         "timing": timing(ups, 60.0, first_frame_time(folder)),
         "units_naming_H": len(per), "named": sum(p["named"] for p in per.values()),
         "within_batch_interval": sum(p["within_batch_interval"] for p in per.values()),
+        "overlapping_batch_interval": sum(p["overlapping_batch_interval"] for p in per.values()),
         reference_key: sum(1 for u in ups if u["H_s"] is not None
                            and u["H_ci95"][0] <= reference[u["unit"]] <= u["H_ci95"][1]),
         "per_unit": per, "delay_s": s["delay_s"], "processing_ms_per_frame": s["processing_ms_per_frame"],
@@ -208,7 +243,7 @@ def part_osl(work):
     dyr = {p["name"]: p["H_reference_s"] for p in plants}
     s = run_part(OSL, work / "osl", 95.0, 60.0, screenshot_at=88.0)
     _, out = end_to_end(s, work / "osl", batch, dyr, "dyr_in_interval")
-    return {**out, "log": s["log"]}
+    return {**out, "whole_recording": whole_recording(work / "osl", batch, s["updates_list"], 87.0), "log": s["log"]}
 
 
 def part_npcc(work):
@@ -283,6 +318,7 @@ def part_faults(work):
                                                                  "connect_failures")},
                             "decoder_rejected": st.get("decoder_rejected", {}),
                             "unusable_samples": sum(st.get("unusable_samples", {}).values()),
+                            "stale_samples": sum(st.get("stale_samples", {}).values()),
                             "restarts": max((u["segment"] for u in s["updates_list"]), default=0) - 1,
                             "log": [x for x in s["log"] if "stream" in x]})
     return out
@@ -363,6 +399,8 @@ def report(doc) -> str:
                   f"{_f(t['update_spacing_s'] and t['update_spacing_s']['max'])} s",
                   f"- units naming an H: {r['units_naming_H']} of {r['units']}; updates naming an H within the batch "
                   f"run's 95 % interval: {r['within_batch_interval']} of {r['named']}"
+                  + (f"; whose interval overlaps it: {r['overlapping_batch_interval']}"
+                     if "overlapping_batch_interval" in r else "")
                   + (f"; ANDES's H inside the update's interval: {r['truth_in_interval']} of {r['named']}"
                      if "truth_in_interval" in r else "")
                   + (f"; the .dyr H inside the update's interval: {r['dyr_in_interval']} of {r['named']}"
@@ -372,7 +410,16 @@ def report(doc) -> str:
                   f"- replay (`jaxdse run replay.toml`): {r['replay']['updates']} updates, same timestamps: "
                   f"{r['replay']['same_timestamps']}, largest relative difference of H "
                   f"{r['replay']['largest_relative_difference_H']:.1e}, of its interval "
-                  f"{r['replay']['largest_relative_difference_interval']:.1e}", ""]
+                  f"{r['replay']['largest_relative_difference_interval']:.1e}"]
+        w = r.get("whole_recording")
+        if w:
+            off = [f"{k} {v['H_s']:.3f} s (batch {v['batch_ci95'][0]:.3f}-{v['batch_ci95'][1]:.3f})"
+                   for k, v in w["per_unit"].items() if not v["within"]]
+            lines.append(f"- the same stream replayed with a {w['window_s']:g} s window (the whole recording, as "
+                         f"the batch run): the last update of {w['within_batch_interval']} of the {w['units']} units "
+                         f"the live run identified lies within the batch interval"
+                         + (f"; not: {', '.join(off)}" if off else ""))
+        lines.append("")
     a = doc.get("ambient")
     if a:
         lines += ["## ANDES npcc ambient, 10 units, 30 frames/s at 10x, window 120 s", "",
@@ -389,7 +436,7 @@ def report(doc) -> str:
                 lines.append(f"| {run['run']} | `{row['fault']}` | {row['what']} | {_f(row['H_median_before_s'])} | "
                              f"{_f(row['H_median_after_s'])} | {_f(row['first_estimate_after_fault_s'], '.1f')} |")
         lines += ["", "| run | updates | verdicts | identified, interval outside the batch interval | identified "
-                  "more than 10 % off the .dyr H | counts | decoder rejected | unusable samples | restarts |",
+                  "more than 10 % off the .dyr H | counts | decoder rejected | unusable / stale samples | restarts |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for run in f["runs"]:
             off = run["identified_more_than_10_percent_off_dyr"]
@@ -397,7 +444,8 @@ def report(doc) -> str:
                          f"{run['identified_outside_batch_interval']} | {len(off)}"
                          + "".join(f" ({o['unit']} at {o['t_s']:.0f} s: {o['H_s']:.3f} s, .dyr {o['H_dyr_s']:.3f} s)"
                                    for o in off[:2])
-                         + f" | {run['counts']} | {run['decoder_rejected']} | {run['unusable_samples']} | "
+                         + f" | {run['counts']} | {run['decoder_rejected']} | {run['unusable_samples']} / "
+                         f"{run.get('stale_samples', 0)} | "
                          f"{run['restarts']} |")
         lines.append("")
     c = doc.get("capacity")
