@@ -22,12 +22,13 @@ NumPy only: ``event_start``, ``windows``, ``oscillatory_modes`` (``dominant_mode
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
-from threadpoolctl import threadpool_limits
+from threadpoolctl import ThreadpoolController
 
 WINDOW_NAMES = ("pre", "event", "post")
 """Window names, in time order."""
@@ -258,8 +259,15 @@ def oscillatory_modes(t, y, detrend: str = "final", max_order: int = 20, max_sam
     # One BLAS thread: the matrices are small (about 200 x 100 for a 10 s window at 30 frames/s)
     # and OpenBLAS's threads cost more than they give; on 2 busy cores one SVD took 20-70 ms
     # threaded against 2 ms (0.87 s per unit of jaxdse fleet's window criteria, 0.04 s now).
-    with threadpool_limits(limits=1, user_api="blas"):
+    with _blas().limit(limits=1, user_api="blas"):
         return _pencil_modes(y, n, dt, k, h, duration, max_order, min_energy_fraction, fmin_hz)
+
+
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The process's thread pools, found once: a ``threadpool_limits`` looks for them in the
+    loaded libraries on every call (3 ms, a third of a unit's window criteria)."""
+    return ThreadpoolController()
 
 
 def _pencil_modes(y, n, dt, k, h, duration, max_order, min_energy_fraction, fmin_hz) -> list[Mode]:
