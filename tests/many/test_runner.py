@@ -56,9 +56,9 @@ def test_compiler_options_follow_the_optimisation_setting():
 
 
 def test_chunks_on_the_thread_pool_equal_the_units_alone(cut25, plant, assess_jit):
-    """Three units in chunks of two: the first chunk compiles in the calling thread, the
-    second runs on the pool (with two or more cores; in the calling thread on one core);
-    every unit equals itself assessed alone, in order."""
+    """Three units in chunks of two: the program compiles in the calling thread, the chunks
+    run on the pool (with two or more cores; in the calling thread on one core); every unit
+    equals itself assessed alone, in order."""
     from jaxdse._many import runner
 
     other = jd.Plant(governor=jd.TGOV1(r_pu=0.05))

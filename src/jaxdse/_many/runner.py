@@ -38,8 +38,7 @@ BUCKETS_PER_OCTAVE = 4
 that the units of a run share a few compiled shapes."""
 RUN_BYTES = 3 * 2**30
 """Working memory [B] that the chunks on the pool of :func:`workers` threads may take
-together; it sets the units per compiled call. (A group's first chunk, compiling in the
-calling thread, may run beside them.)"""
+together; it sets the units per compiled call."""
 BYTES_PER_SAMPLE = 8 * 80
 """Bytes per sample per front end held at once (~80 float64 arrays, measured on the bootstrap)."""
 MAX_PLAYBACK_SUBSTEPS = 24
@@ -169,9 +168,9 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
     """:func:`jaxdse.assess` every unit, vmapped within groups; one :class:`Assessment` per
     unit, in order, with host (NumPy) arrays cut to the unit's length and time-shifted.
 
-    The first chunk of each group compiles its function in the calling thread; the group's
-    other chunks then run side by side on a pool of threads (:func:`workers`), each taking
-    ``RUN_BYTES`` divided by the number of workers.
+    Each group's function is compiled in the calling thread; the group's chunks then run side
+    by side on a pool of threads (:func:`workers`), each taking ``RUN_BYTES`` divided by the
+    number of workers.
 
     Arguments:
         units: the units; each has its own recording and plant.
@@ -201,11 +200,14 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
         step = chunk or units_per_call(length, identify_settings, len(members), pool_size)
         plans.append(_Plan(length, members, (recs, plants, refs), step))
 
-    def call(plan: _Plan, start: int) -> str:
+    def chunk(plan: _Plan, start: int) -> tuple:
         # A short last chunk repeats its last member: one compiled shape per group.
         idx = np.minimum(np.arange(start, start + plan.step), len(plan.members) - 1)
-        part = (jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in plan.inputs)
-        res = jax.device_get(run(*part, config, settings, identify_settings, verdict_settings))
+        return tuple(jtu.tree_map(lambda x: np.asarray(x)[idx], a) for a in plan.inputs)
+
+    def call(plan: _Plan, start: int, compiled) -> str:
+        res = jax.device_get(compiled(*chunk(plan, start), config, settings, identify_settings,
+                                      verdict_settings))
         for j in range(min(plan.step, len(plan.members) - start)):
             k = plan.members[start + j]
             out[k] = _cut_shift(jtu.tree_map(lambda x, j=j: x[j], res),
@@ -217,17 +219,18 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
     with ThreadPoolExecutor(pool_size) as pool:
         pending: set = set()
         for plan in plans:
-            # The group's first chunk compiles, in the calling thread (its JAX contexts and
-            # logs apply); its other chunks then run side by side on the pool, while the
-            # calling thread goes on to the next group.
+            # The group's program is traced and compiled in the calling thread (its JAX contexts
+            # and logs apply); its chunks then run side by side on the pool, while the calling
+            # thread goes on to compile the next group's.
             with _collector_paused():
-                report(call(plan, 0))
-            rest = range(plan.step, len(plan.members), plan.step)
+                compiled = run.lower(*chunk(plan, 0), config, settings, identify_settings,
+                                     verdict_settings).compile()
+            starts = range(0, len(plan.members), plan.step)
             if pool_size > 1:
-                pending |= {pool.submit(call, plan, start) for start in rest}
+                pending |= {pool.submit(call, plan, start, compiled) for start in starts}
             else:
-                for start in rest:
-                    report(call(plan, start))
+                for start in starts:
+                    report(call(plan, start, compiled))
             finished, pending = wait(pending, timeout=0)
             for f in finished:
                 report(f.result())
@@ -251,8 +254,14 @@ def _collector_paused():
 
 
 def _pool_size(groups: dict) -> int:
-    """Threads of the pool for these groups (:func:`workers`; 1 under a thread-local context)."""
-    n = workers(max((len(m) for m in groups.values()), default=1))
+    """Threads of the pool for these groups (:func:`threads` of the largest group's units)."""
+    return threads(max((len(m) for m in groups.values()), default=1))
+
+
+def threads(calls: int) -> int:
+    """Threads to run ``calls`` compiled calls on: :func:`workers`, 1 under a thread-local
+    JAX context."""
+    n = workers(calls)
     return n if n == 1 or _same_context_in_threads() else 1
 
 
