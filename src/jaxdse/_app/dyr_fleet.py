@@ -11,6 +11,8 @@ its page says which record. Units of one model structure and length run in one v
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Iterator
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Literal
 
 import equinox as eqx
@@ -20,6 +22,7 @@ import numpy as np
 
 from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
 from .._dyr.records import UnitModel, unit_model
+from .._many.runner import threads
 from .._models.exciters import EXCITERS
 from .._models.stabilisers import STABILISERS
 
@@ -187,9 +190,12 @@ class DyrOutcome:
         return out
 
 
-def play_back_plants(jobs: dict, options: PlaybackOptions) -> dict:
+def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str, PlantPlayback]]:
     """Play back every plant of ``jobs`` = {name: (PlantModel, TerminalSeries on the plant
-    base)}; returns {name: PlantPlayback}. Units of one structure and length share a call."""
+    base)}; yields (name, PlantPlayback) as each plant's units are done. Units of one structure
+    and length share a call; the calls trace, compile and run side by side on the cores (a call
+    blocks its thread until its result is ready), the largest first, so that the caller's work
+    on the plants done overlaps the calls still running."""
     flat = []
     for name, (pm, series) in jobs.items():
         m_total = float(np.sum(pm.mbase_mva))
@@ -206,21 +212,33 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> dict:
     for item in flat:
         key = (jax.tree_util.tree_structure(item[2]), int(item[3].t_s.shape[0]))
         groups.setdefault(key, []).append(item)
-    results = {}
-    for items in groups.values():
-        res = _batch(_stack([it[2] for it in items]), _stack([it[3] for it in items]), options.settings)
-        for j, (name, k, _, _) in enumerate(items):
-            results[(name, k)] = jax.tree.map(lambda a, j=j: np.asarray(a[j]), res)
-    out = {}
-    for name, (pm, series) in jobs.items():
-        w = pm.mbase_mva / np.sum(pm.mbase_mva)
-        rs = [results[(name, k)] for k in range(len(pm.units))]
-        omega_s = float(pm.units[0].unit.machine.omega_s_rad_s)
-        out[name] = PlantPlayback(p_pu=sum(wk * r.p_pu for wk, r in zip(w, rs)),
-                                  q_pu=sum(wk * r.q_pu for wk, r in zip(w, rs)),
-                                  x2_rad_s=sum(wk * (r.omega_pu - 1.0) for wk, r in zip(w, rs)) * omega_s,
-                                  ok=all(bool(r.ok) for r in rs))
-    return out
+
+    def run(items):
+        return items, jax.device_get(_batch(_stack([it[2] for it in items]), _stack([it[3] for it in items]),
+                                            options.settings))
+
+    order = sorted(groups.values(), key=len, reverse=True)
+    results: dict = {}
+    left = {name: len(pm.units) for name, (pm, _) in jobs.items()}
+    with ThreadPoolExecutor(threads(len(order))) as pool:
+        for done in as_completed([pool.submit(run, items) for items in order]):
+            items, res = done.result()
+            for j, (name, k, _, _) in enumerate(items):
+                results[(name, k)] = jax.tree.map(lambda a, j=j: a[j], res)
+                left[name] -= 1
+                if not left[name]:
+                    pm = jobs[name][0]
+                    yield name, _plant_playback(pm, [results.pop((name, i)) for i in range(len(pm.units))])
+
+
+def _plant_playback(pm: PlantModel, rs: list) -> PlantPlayback:
+    """The plant's playback: its units' (PlaybackResult, host arrays) MBASE-weighted sum."""
+    w = pm.mbase_mva / np.sum(pm.mbase_mva)
+    omega_s = float(pm.units[0].unit.machine.omega_s_rad_s)
+    return PlantPlayback(p_pu=sum(wk * r.p_pu for wk, r in zip(w, rs)),
+                         q_pu=sum(wk * r.q_pu for wk, r in zip(w, rs)),
+                         x2_rad_s=sum(wk * (r.omega_pu - 1.0) for wk, r in zip(w, rs)) * omega_s,
+                         ok=all(bool(r.ok) for r in rs))
 
 
 __all__ = ["PLAYBACK_MODELS", "SIMULATED_RECORDS", "CalibrateOptions", "DyrOutcome", "PlantModel",

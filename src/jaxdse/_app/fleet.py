@@ -18,6 +18,7 @@ import json
 import sys
 import time
 from collections import Counter
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -81,11 +82,17 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     assessed = assess_units(work, fleet.observer,
                             settings, fleet.identify, fleet.verdict, size=size,
                             progress=lambda line: progress.step(f"assessed {line}"))
-    dyr = dyr_playbacks(fleet, [u[0] for u in units], assessed)
+    # Each plant's entry (its window criteria) as soon as its playback is done, while the
+    # playbacks of other plants run.
+    index = {u[0].name: k for k, u in enumerate(units)}
+    done = {}
+    for name, dyr in dyr_playbacks(fleet, [u[0] for u in units], assessed):
+        (p, _, _, quality), a = units[index[name]], assessed[index[name]]
+        done[name] = (_traces(a.estimate, a.replay, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
+        progress.step(f"assessed {p.name}")
     entries, traces = [], {}
-    for (p, rec, t0, quality), a in zip(units, assessed):
-        traces[p.name] = _traces(a.estimate, a.replay, dyr.get(p.name))
-        entry = fleet_entry(p, a, quality, fleet.criteria, dyr.get(p.name))
+    for p, *_ in units:
+        traces[p.name], entry = done[p.name]
         entries.append(entry)
         if entry["verdict"] != "identified":
             why = "; ".join(v for key, v in entry["reasons"].items() if key not in NOTES) or "see fleet.json"
@@ -94,7 +101,6 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
             why = "; ".join(val["reasons"]) or "see fleet.json"
             print(f"jaxdse: warning: {p.name}: model validation ({MODEL_WORDS[val['model']]}) "
                   f"{val['result']}: {why}", file=stream)
-        progress.step(f"assessed {p.name}")
     doc = fleet_document(fleet, entries, skipped, time.perf_counter() - t_start)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_report(out_dir, doc, traces, figures=fleet.figures)
@@ -114,22 +120,24 @@ def fleet(path, out_dir, stream=None) -> list[dict]:
     return run_fleet(load_fleet(path), Path(out_dir), stream)["units"]
 
 
-def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant], assessed) -> dict:
-    """{plant name: DyrOutcome} when ``[playback] model = "dyr"``, else {}."""
+def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant],
+                  assessed) -> Iterator[tuple[str, DyrOutcome | None]]:
+    """(plant name, DyrOutcome) for every plant as its .dyr playback is done (first the plants
+    that play back the surrogate), when ``[playback] model = "dyr"``; else (name, None)."""
     if fleet.playback.model != "dyr":
-        return {}
-    out, jobs = {}, {}
+        yield from ((p.name, None) for p in plants)
+        return
+    jobs = {}
     for p, a in zip(plants, assessed):
         pm = plant_model(fleet.raw, fleet.dyr, p, fleet.playback)
         if pm.fallback:
-            out[p.name] = DyrOutcome(pm, None)
+            yield p.name, DyrOutcome(pm, None)
             continue
         tr = a.estimate.trajectories
         jobs[p.name] = (pm, terminal_series(a.estimate.time_s, tr.v_t_pu, tr.theta_t_rad, tr.p_t_pu,
                                             tr.q_t_pu))
-    for name, pb in play_back_plants(jobs, fleet.playback).items():
-        out[name] = DyrOutcome(jobs[name][0], pb)
-    return out
+    for name, pb in play_back_plants(jobs, fleet.playback):
+        yield name, DyrOutcome(jobs[name][0], pb)
 
 
 def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
