@@ -637,7 +637,8 @@ class PmuServer:
             elif f.kind == "clock":
                 tq = int(f.value if f.value is not None else 15)
             elif f.kind == "stale":
-                held = self.records[self.config_now][max(k - round((t_stream - f.start_s) * self.source.rate) - 1, 0)]
+                before = k - round((t_stream - f.start_s) * self.source.rate) - 1   # the frame before START
+                held = self.records[self.config_now][max(before, 0)]
                 for j, name in enumerate(names):
                     if f.station in (None, name):
                         for field in rec.dtype.names:
