@@ -27,8 +27,9 @@ Applied at the edge, in NumPy, in this order:
    frames (every frame of a run that repeats exactly in all phasor channels, in data whose
    frames otherwise change: ``REPEATS_RARE``), and spikes (a Hampel filter: deviation from a
    running median beyond ``SPIKE_SIGMAS`` robust standard deviations, in runs of at most
-   ``SPIKE_MAX_SAMPLES`` that stand out from the curve of their neighbours) become missing; a spike in one phasor with the other off its median
-   within a frame (a fault: the voltage dips, the current answers) is a disturbance and is kept;
+   ``SPIKE_MAX_SAMPLES`` that stand out from the curve of their neighbours) become missing; a
+   spike in one phasor with the other off its median within a frame (a fault: the voltage
+   dips, the current answers) is a disturbance and is kept;
 6. gaps: missing samples form gaps; gaps up to ``max_gap_s`` are bridged by linear
    interpolation of magnitude and unwrapped angle, longer ones split the recording (or fail);
 7. resampling onto a uniform grid (linear, angles unwrapped first).
