@@ -1,5 +1,7 @@
 """``identify``'s regression on a synthetic linear plant, and its verdicts bit by bit."""
 
+from types import SimpleNamespace
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -10,8 +12,11 @@ import jaxdse as jd
 from jaxdse._core.front_end import front_end, reference_torque
 from jaxdse._core.identify import (
     _huber,
+    _quiet_samples,
     _regression,
     front_ends,
+    governor_start,
+    governor_torque,
     identify_front,
     refit_spread,
     weighted_normal_equations,
@@ -99,6 +104,47 @@ def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):
     assert abs(float(ident.a2) / float(ambient.truth.a2) - 1) < 0.01
     assert bool(ident.ok) and float(ident.h_ci95[0]) <= float(ident.h_s) <= float(ident.h_ci95[1])
     assert int(ident.filter_spread_fits) == 2  # the model is right: every filter fits
+
+
+def test_the_governor_starts_near_its_periodic_state_under_an_oscillation(plant):
+    """Under a sustained oscillation of the speed (NASPI OSL case 1's forced oscillation), the
+    state from the mean speed of the stretch after the first sample (``governor_start``) stays
+    within half of the largest error that the equilibrium of the first sample's speed leaves
+    over the oscillation's phases (on OSL case 1, the latter made 3933_tesla's H jump between
+    3.51 and 3.67 s with the start sample)."""
+    gov, dt, t_ref = plant.governor, 0.02, 0.8
+    t = np.arange(0.0, 300.0, dt)
+    dw = jnp.asarray(1e-4 * np.sin(2 * np.pi * 0.4 * t))
+    quiet = SimpleNamespace(v_t=jnp.ones(t.size, complex), i_t=jnp.ones(t.size, complex),
+                            valid=jnp.ones(t.size, bool))
+    run = jax.jit(lambda x, d: governor_torque(gov, d, dt, t_ref, x))
+    periodic = governor_torque(gov, dw, dt, t_ref)               # after 200 s: periodic
+    ours, rest = [], []
+    for k in range(10_000, 10_125, 5):                           # phases over one period
+        truth = periodic[k:k + 1500]
+        ours.append(np.max(np.abs(run(governor_start(gov, quiet, dw, dt, t_ref, k, 1500), dw[k:k + 1500])
+                                  - truth)))
+        rest.append(np.max(np.abs(run(gov.steady_state(t_ref, dw[k]), dw[k:k + 1500]) - truth)))
+    assert max(ours) < 0.5 * max(rest), (max(ours), max(rest))
+
+
+@pytest.mark.parametrize("event", [jd.Event(5.0, "load_step", 0.2), jd.Event(5.0, "frequency_drop", 0.05)])
+def test_the_governor_starts_at_rest_before_an_event(plant, event):
+    """Before an event a constant speed leaves the governor at its equilibrium (noise-free truth
+    kept): the stretch that starts it ends at the event (a load step's jump of the terminal
+    phasors; a frequency drop's departure of the speed), so what follows, although inside
+    T_ref's window, does not enter its start."""
+    sim = jd.simulate(plant, jd.Scenario(
+        duration_s=20.0, ambient_load_std=0.0, ambient_freq_std_hz=0.0, ambient_volt_std=0.0,
+        tve_percent=0.0, freq_noise_hz=0.0, unbalance=0.0, events=(event,)))
+    fe = front_end(sim.recording, plant)
+    gov, dt, t_ref = plant.governor, 0.02, 0.8
+    assert 200 <= int(_quiet_samples(fe, fe.dw, dt, 5, 750)) <= 245
+    rest = gov.torque(gov.steady_state(t_ref, fe.dw[5]), fe.dw[5])
+    x0 = governor_start(gov, fe, fe.dw, dt, t_ref, 5, 750)
+    np.testing.assert_allclose(gov.torque(x0, fe.dw[5]), rest, rtol=0, atol=1e-9)
+    # the whole window's mean speed would have started it elsewhere
+    assert abs(float(jnp.mean(fe.dw[5:755]) - fe.dw[5])) > 1e-7
 
 
 def test_refits_that_explain_nothing_leave_the_spread():

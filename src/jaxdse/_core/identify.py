@@ -78,6 +78,7 @@ from .plant import Plant
 from .playback import playback
 from .recording import Recording
 from .settings import Settings
+from .signals import jumps
 
 Z95 = 1.959963984540054
 """Two-sided 95 % quantile of the standard normal distribution."""
@@ -269,7 +270,8 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     # The regression's inputs of the recording and of the bootstrap's draws, vmapped (one copy).
     every = jax.tree_util.tree_map(lambda x, *xs: jnp.concatenate([jnp.asarray(x)[None], *xs]), fe,
                                    *(() if draws is None else (draws.front_ends,)))
-    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead))(every)
+    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead,
+                                                settings.qss_window_s))(every)
     signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
@@ -331,7 +333,8 @@ def _fit_without(normal, rhs, j: int):
                      jnp.where(keep, rhs, 0.0))
 
 
-def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int = 0):
+def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int = 0,
+             start_s: float = 0.0):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
     Tm - Tm(0); and Tm(0) [pu].
 
@@ -352,7 +355,9 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
 
     x2 = filter_states(smoothing, held(fe.x2_meas))[:, 0]
     dw = filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
-    t_m = governor_torque(plant.governor, dw, dt, t_ref)
+    lead_ = min(lead, dw.shape[0] - 2)
+    x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, jnp.round(start_s / dt))
+    t_m = held(jnp.pad(governor_torque(plant.governor, dw[lead_:], dt, t_ref, x0), (lead_, 0)))
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
     bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (held(fe.f_hz) - plant.machine.f_nominal_hz))
     rotor = held(jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_ref))
@@ -497,18 +502,90 @@ def _noise_level(x, valid):
     return jnp.maximum(1.4826 * masked_median(jnp.abs(d - med), ok) / jnp.sqrt(2.0), 1e-12)
 
 
-def governor_torque(gov: AbstractGovernor, dw, dt, t_ref):
-    """Tm [pu] of the governor model driven by ``dw`` [pu], from equilibrium (Heun steps, one
-    per sample; the governors are slow next to a PMU's frame rate)."""
+START_JUMP_RATIO, START_JUMP_FACTOR = 4.0, 10.0
+"""A jump of the terminal voltage or power phasor between two samples (:func:`jumps`) this many
+times larger than the smooth curvature around it and than the median second difference (the
+.dyr playback's switching-step criterion) ends the stretch that starts the governor model
+(:func:`governor_start`)."""
+START_BASE_S, START_MEAN_S = 2.0, 1.0
+"""So does a departure of the speed's trailing ``START_MEAN_S`` mean from the mean of the
+stretch's first ``START_BASE_S`` [s] ..."""
+START_SIGMAS, START_DEPARTURE_PU = 6.0, 1e-4
+"""... by more than ``START_SIGMAS`` standard errors of the noise, ``START_SIGMAS`` standard
+deviations of the trailing means within the base, and ``START_DEPARTURE_PU`` [pu] of speed
+(6 mHz at 60 Hz). On the ANDES bench an event moves the speed by 6e-4 to 4e-3 pu within a
+second, while on NASPI OSL case 1 the ambient speed stays within 4.3e-5 pu of its first 2 s
+over 30 s, and on ANDES's 10 min ambient recordings departs by 1e-4 after 13 s."""
+
+
+def _quiet_samples(fe: FrontEnd, dw, dt, start: int, samples):
+    """Samples from ``start`` to the first switching event (:data:`START_JUMP_RATIO`) or speed
+    departure (:data:`START_SIGMAS`), at most ``samples`` and at least 1."""
+    n = dw.shape[0] - start
+    j = jnp.arange(n)
+    hit = jumps(fe.v_t[start:], START_JUMP_RATIO, START_JUMP_FACTOR) \
+        | jumps(fe.v_t[start:] * jnp.conj(fe.i_t[start:]), START_JUMP_RATIO, START_JUMP_FACTOR)
+    quiet = jnp.min(jnp.where(hit, j[:-1] + 1, n))
+    x = dw[start:]
+    n0 = jnp.clip(jnp.round(START_BASE_S / dt), 1.0, n)
+    m = jnp.clip(jnp.round(START_MEAN_S / dt), 1.0, n0)
+    base = jnp.sum(jnp.where(j < n0, x, 0.0)) / n0
+    cum = jnp.concatenate([jnp.zeros(1, x.dtype), jnp.cumsum(x - base)])
+    lag = jnp.maximum(j + 1 - m, 0).astype(int)
+    mean = (cum[j + 1] - cum[lag]) / (j + 1 - lag)                  # trailing, up to m samples
+    inside = (j >= m - 1) & (j < n0)
+    spread = jnp.sqrt(jnp.sum(jnp.where(inside, mean**2, 0.0)) / jnp.maximum(jnp.sum(inside), 1))
+    noise = 1.4826 * jnp.median(jnp.abs(jnp.diff(x, 2))) / jnp.sqrt(6.0)
+    tol = jnp.maximum(START_SIGMAS * jnp.maximum(noise * jnp.sqrt(1.0 / m + 1.0 / n0), spread),
+                      START_DEPARTURE_PU)
+    off = (jnp.abs(mean) > tol) & (j >= n0)
+    quiet = jnp.minimum(quiet, jnp.min(jnp.where(off, j - m + 1, n)))
+    return jnp.maximum(jnp.minimum(quiet, samples), 1)
+
+
+def _heun(gov: AbstractGovernor, dt, t_ref):
+    """One Heun step of the governor over a sample interval, inputs (dw at its start, at its end)."""
     def step(x, d):
         d0, d1 = d
         k1 = gov.vector_field(x, d0, t_ref)
         k2 = gov.vector_field(x + dt * k1, d1, t_ref)
-        x = x + 0.5 * dt * (k1 + k2)
-        return x, gov.torque(x, d1)
+        return x + 0.5 * dt * (k1 + k2)
+    return step
 
-    x0 = gov.steady_state(t_ref, dw[0])
-    _, tm = jax.lax.scan(step, x0, (dw[:-1], dw[1:]))
+
+def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: int, samples):
+    """The governor model's state at sample ``start``: its equilibrium for the mean speed of the
+    quiet stretch that follows (up to the first event, :func:`_quiet_samples`; at most
+    ``samples``, T_ref's quasi-steady window).
+
+    Not the equilibrium of the first sample's speed: the governor's state carries the speed's
+    past, which ambient wander and oscillations leave near their mean, while one sample sits off
+    it. On NASPI OSL case 1 (a forced oscillation over ambient load noise, no event), the
+    governor of 3933_tesla started from a sample 1.5 mHz off the mean; Tm crept by 3.7e-4 pu over
+    the record, the governor correction took it (-55 to -79 %), and H came out 3.51-3.55 or 3.67 s
+    depending on the sample the fit started at. Before an event a constant speed gives the
+    equilibrium of that speed (noise-free truth is kept). (Driving the governor over the stretch
+    backwards in time, to weigh the speed by the governor's own memory, gave the same H on
+    OSL case 1 but doubles the phase error under an oscillation.)
+    """
+    quiet = _quiet_samples(fe, dw, dt, start, samples)
+    use = fe.valid[start:] & (jnp.arange(dw.shape[0] - start) < quiet)
+    mean = jnp.sum(jnp.where(use, dw[start:], 0.0)) / jnp.maximum(jnp.sum(use), 1)
+    return gov.steady_state(t_ref, mean)
+
+
+def governor_torque(gov: AbstractGovernor, dw, dt, t_ref, x0=None):
+    """Tm [pu] of the governor model driven by ``dw`` [pu], from the state ``x0`` (default: the
+    equilibrium for ``dw[0]``; :func:`governor_start`) (Heun steps, one per sample; the
+    governors are slow next to a PMU's frame rate)."""
+    step = _heun(gov, dt, t_ref)
+
+    def scan_step(x, d):
+        x = step(x, d)
+        return x, gov.torque(x, d[1])
+
+    x0 = gov.steady_state(t_ref, dw[0]) if x0 is None else x0
+    _, tm = jax.lax.scan(scan_step, x0, (dw[:-1], dw[1:]))
     return jnp.concatenate([gov.torque(x0, dw[0])[None], tm])
 
 

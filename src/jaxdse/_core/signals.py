@@ -53,3 +53,21 @@ def measured_speed_deviation(f_hz, delta, theta, dt, f_nominal_hz, half_width: i
     in the same frame.
     """
     return 2.0 * jnp.pi * (f_hz - f_nominal_hz) + smooth_derivative(delta - theta, dt, half_width, n)
+
+
+def jumps(x, ratio, factor):
+    """Per sample interval: True where ``x`` (real or complex) jumps between two samples (a
+    switching event). A jump J between samples k and k+1 puts +J and -J into the second
+    differences d2 = x(j+1) - 2 x(j) + x(j-1) at samples k and k+1; the jump |d2(k) - d2(k+1)| / 2
+    must exceed ``ratio`` times the smooth curvature around it (|d2| at samples k-1 and k+2, and
+    the part common to both, |d2(k) + d2(k+1)| / 2) and ``factor`` times the median |d2| (the
+    noise). Second differences, not first: a steady frequency offset turns a phasor by the same
+    angle each frame, and after a large event the phasor rotates fast while it jumps."""
+    d2 = jnp.diff(x, 2)
+    p = jnp.pad(d2, 2)  # p[k + 1]: d2 at sample k (0 at the ends)
+    k = jnp.arange(x.shape[0] - 1)
+    a, b = p[k + 1], p[k + 2]
+    jump = jnp.abs(a - b) / 2
+    smooth = jnp.maximum(jnp.maximum(jnp.abs(p[k]), jnp.abs(p[k + 3])), jnp.abs(a + b) / 2)
+    noise = jnp.median(jnp.abs(d2))
+    return (jump > ratio * smooth) & (jump > factor * noise)

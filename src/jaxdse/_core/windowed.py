@@ -43,14 +43,16 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from .drem import ObserverConfig
-from .front_end import StreamContext, front_end, next_context
+from .front_end import StreamContext, front_end, next_context, reference_torque
 from .identify import (
     Z95,
     Identified,
     IdentifySettings,
     _design_row,
     _fit_without,
+    _heun,
     _result,
+    governor_start,
     refit_spread,
     solve_spd,
 )
@@ -89,6 +91,14 @@ class WindowSettings(eqx.Module):
     def tail_samples(self, frame_rate_hz: float, settings: Settings) -> int:
         """Samples of a chunk's slice after its own: the lookahead, at least the derivative halo."""
         return max(halo(settings), round(self.lookahead_s * frame_rate_hz))
+
+    def start_samples(self, frame_rate_hz: float, settings: Settings) -> int:
+        """Samples that a segment's first slice holds beyond a chunk's slice: its first
+        ``qss_window_s`` (at most ``window_s``) after the halo, from which T_ref and the
+        governor's initial state are taken (:func:`window_chunk`). The first chunk waits for them;
+        the estimate waits for the full window anyway."""
+        stretch = round(min(settings.qss_window_s, self.window_s) * frame_rate_hz)
+        return max(0, stretch - self.chunk_samples(frame_rate_hz) - self.tail_samples(frame_rate_hz, settings))
 
 
 class Blocks(NamedTuple):
@@ -143,16 +153,21 @@ def halo(settings: Settings) -> int:
 
 
 def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings: Settings,
-                 identify_settings: IdentifySettings, carry: Carry | None, size: int) -> tuple[Blocks, Carry]:
+                 identify_settings: IdentifySettings, carry: Carry | None, size: int,
+                 start: int = 0) -> tuple[Blocks, Carry]:
     """One chunk of a stream: its block of sufficient statistics and the carry to the next.
 
     Arguments:
         rec: the slice: :func:`halo` samples (the derivative window), the chunk's ``size`` own
-            samples, then the tail (:meth:`WindowSettings.tail_samples`: the lookahead). The
-            next chunk's slice starts where this one's own samples end, less the halo: chunk k
-            of a segment owns samples ``halo + k * size`` to ``halo + (k + 1) * size``.
-        carry: the previous chunk's; None at a segment's first chunk (T_ref, the filters and
-            the governor start there, at rest).
+            samples, then the tail (:meth:`WindowSettings.tail_samples`: the lookahead), then,
+            at a segment's first chunk, ``start`` more samples. The next chunk's slice starts
+            where this one's own samples end, less the halo: chunk k of a segment owns samples
+            ``halo + k * size`` to ``halo + (k + 1) * size``.
+        carry: the previous chunk's; None at a segment's first chunk: the filters and the
+            governor start there; T_ref is the quasi-steady mean over the slice's first
+            ``qss_window_s``, and the governor's state comes from the slice's quiet part
+            (:func:`~jaxdse._core.identify.governor_start`), as the batch fit's do.
+        start: see ``rec`` (:meth:`WindowSettings.start_samples`; 0 with a carry).
 
     Pure: jit and vmap (over the units of a fleet) pass through.
     """
@@ -167,16 +182,19 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     def cut(x):
         return jax.lax.dynamic_slice_in_dim(x, lead, size)
 
-    te, dw_raw, x2 = cut(fe.alg.t_e_pu), cut(fe.dw), cut(fe.x2_meas)
-    x2_ahead = fe.x2_meas[lead:]                                  # own samples and the lookahead
+    te, x2 = cut(fe.alg.t_e_pu), cut(fe.x2_meas)
+    x2_ahead = fe.x2_meas[lead:ts.shape[0] - start]               # own samples and the lookahead
     gov = plant.governor
     smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
     if carry is None:   # at rest at the segment's first own sample
-        refs = gov.reference_from_steady(te, dw_raw)
-        t_ref = jnp.mean(refs)
+        t_ref = reference_torque(ts, fe, gov, settings)   # the batch fit's, as far as the slice goes
         x2_prev, smooth0 = x2[0], jnp.stack([x2[0], 0.0])
-        dw_prev = x2[0] / m.omega_s
-        gov0 = gov.steady_state(t_ref, dw_prev)
+        # the batch fit's governor input over the slice (low-passed forwards and backwards)
+        held = jnp.where(jnp.arange(ts.shape[0]) < lead, fe.x2_meas[lead], fe.x2_meas)
+        dw_start = filter_states(smoothing, filter_states(smoothing, held)[:, 0],
+                                 reverse=True)[:, 0] / m.omega_s
+        gov0 = governor_start(gov, fe, dw_start, dt, t_ref, lead, ts.shape[0])
+        dw_prev = dw_start[lead]
         t_m0, elapsed = gov.torque(gov0, dw_prev), jnp.zeros((), jnp.int32)
     else:
         t_ref, x2_prev, smooth0, dw_prev = carry.t_ref, carry.x2, carry.smooth, carry.dw
@@ -185,13 +203,15 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     dw = filter_states(smoothing, smooth[:, 0], reverse=True)[:size, 0] / m.omega_s
 
     def heun(x, d):   # governor_torque's step, from a carried state
-        d0, d1 = d
-        k1 = gov.vector_field(x, d0, t_ref)
-        k2 = gov.vector_field(x + dt * k1, d1, t_ref)
-        x = x + 0.5 * dt * (k1 + k2)
-        return x, (x, gov.torque(x, d1))
+        x = _heun(gov, dt, t_ref)(x, d)
+        return x, (x, gov.torque(x, d[1]))
 
-    _, (gov_states, t_m) = jax.lax.scan(heun, gov0, (jnp.concatenate([dw_prev[None], dw[:-1]]), dw))
+    if carry is None:   # gov0 is the state at the first own sample, as in the batch fit
+        _, (states, t_m) = jax.lax.scan(heun, gov0, (dw[:-1], dw[1:]))
+        gov_states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), gov0, states)
+        t_m = jnp.concatenate([gov.torque(gov0, dw[0])[None], t_m])
+    else:
+        _, (gov_states, t_m) = jax.lax.scan(heun, gov0, (jnp.concatenate([dw_prev[None], dw[:-1]]), dw))
     derived = rec.f_hz is None
     bus = jnp.zeros_like(te) if derived else 2.0 * jnp.pi * (cut(fe.f_hz) - m.f_nominal_hz)
     rotor = cut(fe.alg.delta_rad) if derived else cut(fe.alg.delta_rad - fe.theta_ref)

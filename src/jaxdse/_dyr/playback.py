@@ -20,6 +20,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._core.lti import zero_phase_lowpass
+from .._core.signals import jumps
 from .unit import DyrUnit, UnitInputs, UnitReferences
 
 
@@ -158,21 +159,9 @@ def initial_operating_point(series: TerminalSeries, settings: PlaybackSettings):
 
 def voltage_steps(series: TerminalSeries, settings: PlaybackSettings):
     """Per frame interval: True where the voltage phasor jumps (a switching event between two
-    frames). A jump J between frames k and k+1 puts +J and -J into the second differences
-    d2 = V(j+1) - 2 V(j) + V(j-1) at frames k and k+1; the jump |d2(k) - d2(k+1)| / 2 must exceed
-    ``step_ratio`` times the smooth curvature around it (|d2| at frames k-1 and k+2, and the
-    part common to both, |d2(k) + d2(k+1)| / 2) and ``step_factor`` times the median |d2| (the
-    noise). Second differences, not first: a steady frequency offset turns the phasor by the same
-    angle each frame, and after a large event the phasor rotates fast while it jumps."""
-    v = series.v_mag_pu * jnp.exp(1j * series.v_ang_rad)
-    d2 = jnp.diff(v, 2)
-    p = jnp.pad(d2, 2)  # p[k + 1]: d2 at frame k (0 at the ends)
-    k = jnp.arange(v.shape[0] - 1)
-    a, b = p[k + 1], p[k + 2]
-    jump = jnp.abs(a - b) / 2
-    smooth = jnp.maximum(jnp.maximum(jnp.abs(p[k]), jnp.abs(p[k + 3])), jnp.abs(a + b) / 2)
-    noise = jnp.median(jnp.abs(d2))
-    return (jump > settings.step_ratio * smooth) & (jump > settings.step_factor * noise)
+    frames; :func:`~jaxdse._core.signals.jumps` with ``step_ratio`` and ``step_factor``)."""
+    return jumps(series.v_mag_pu * jnp.exp(1j * series.v_ang_rad), settings.step_ratio,
+                 settings.step_factor)
 
 
 def _filtered(x, step, dt, cutoff_hz):

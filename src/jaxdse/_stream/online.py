@@ -13,7 +13,10 @@ unit, as the file readers do (``jaxdse._io.measurement``):
 * chunks of ``update_s`` start on the reporting grid (grid index a multiple of the chunk's
   samples), so that every unit of the group is ready at the same frame and one vmapped call
   (:func:`jaxdse._core.windowed.window_chunk`) serves them all; a restarted unit waits for the
-  next chunk boundary.
+  next chunk boundary;
+* a segment's first chunk waits for the segment's first ``qss_window_s`` (at most
+  ``window_s``: :meth:`~jaxdse._core.windowed.WindowSettings.start_samples`), which give T_ref
+  and the governor's initial state; the chunks behind it then follow one per frame.
 
 After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
 intervals and the verdict of the window). Three compiled programs per group: a segment's first
@@ -76,8 +79,9 @@ class Update:
 
 
 @eqx.filter_jit
-def _first(recs, plants, config, settings, ident, size):
-    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None, size))(recs, plants)
+def _first(recs, plants, config, settings, ident, size, start):
+    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None, size, start))(
+        recs, plants)
 
 
 @eqx.filter_jit
@@ -131,10 +135,11 @@ class OnlineGroup:
         self.size = window.chunk_samples(self.rate)
         self.halo = halo(settings)
         self.tail = window.tail_samples(self.rate, settings)
+        self.start = window.start_samples(self.rate, settings)
         self.max_gap = int(math.floor(max_gap_s * self.rate + 1e-6))
         self.with_frequency = with_frequency
         self.span = self.halo + self.size + self.tail
-        self.capacity = self.span + self.size + self.max_gap + 2
+        self.capacity = self.span + self.start + self.size + self.max_gap + 2
         self.buf = np.full((5, self.u, self.capacity), np.nan)
         self.base = None                 # grid index of buffer column 0
         self.last_valid = np.full(self.u, -1, np.int64)   # grid index of each unit's last usable sample
@@ -206,8 +211,7 @@ class OnlineGroup:
 
     # --- chunks ------------------------------------------------------------------------------
 
-    def _slices(self, units):
-        span = self.span
+    def _slices(self, units, span):
         cols = (self.slice_start[units] - self.base)[:, None] + np.arange(span)[None, :]
         x = self.buf[:, units[:, None], cols]                     # [5, k, span]
         t = np.arange(span) * self.dt
@@ -222,17 +226,21 @@ class OnlineGroup:
         return jax.tree_util.tree_map(lambda x: jnp.asarray(x[rows]), rec_part)
 
     def _chunks(self) -> list[Update]:
-        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + self.span - 1)
+        span = np.where(self.started, self.span, self.span + self.start)   # a first slice: longer
+        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1)
         if not ready.any():
             return []
-        units = np.flatnonzero(ready)
-        recs = self._full(self._slices(units), units)
         first = ready & ~self.started
         nxt = ready & self.started
         blocks = carries = None
         if first.any():
-            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident, self.size)
+            units = np.flatnonzero(first)
+            recs = self._full(self._slices(units, self.span + self.start), units)
+            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident, self.size,
+                                     self.start)
         if nxt.any():
+            units = np.flatnonzero(nxt)
+            recs = self._full(self._slices(units, self.span), units)
             b2, c2 = _next(recs, self.plants, self.carries, self.config, self.settings, self.ident, self.size)
             if blocks is None:
                 blocks, carries = b2, c2
