@@ -98,7 +98,8 @@ class WindowSettings(eqx.Module):
         governor's initial state are taken (:func:`window_chunk`). The first chunk waits for them;
         the estimate waits for the full window anyway."""
         stretch = round(min(settings.qss_window_s, self.window_s) * frame_rate_hz)
-        return max(0, stretch - self.chunk_samples(frame_rate_hz) - self.tail_samples(frame_rate_hz, settings))
+        chunk = self.chunk_samples(frame_rate_hz) + self.tail_samples(frame_rate_hz, settings)
+        return max(0, stretch - chunk)
 
 
 class Blocks(NamedTuple):
