@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor, as_completed
-from typing import Literal
+from typing import Literal, NamedTuple
 
 import equinox as eqx
 import jax
@@ -22,6 +22,7 @@ import numpy as np
 
 from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
 from .._dyr.records import UnitModel, unit_model
+from .._many import programs
 from .._many.runner import threads
 from .._models.exciters import EXCITERS
 from .._models.stabilisers import STABILISERS
@@ -151,9 +152,19 @@ def terminal_series(t_s, v_mag, v_ang, p, q) -> TerminalSeries:
     return TerminalSeries(*(jnp.asarray(a) for a in (t_s, v_mag, v_ang, i.real, i.imag)))
 
 
-@eqx.filter_jit
+class _Played(NamedTuple):
+    """What a plant's playback takes from each unit's :class:`PlaybackResult` (host arrays)."""
+
+    p_pu: np.ndarray
+    q_pu: np.ndarray
+    omega_pu: np.ndarray
+    ok: np.ndarray
+
+
 def _batch(units, series, settings):
-    return eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
+    """The units' playbacks, vmapped (one program per structure and length; :mod:`programs`)."""
+    r = eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
+    return r.p_pu, r.q_pu, r.omega_pu, r.ok
 
 
 def _stack(trees):
@@ -214,8 +225,9 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
         groups.setdefault(key, []).append(item)
 
     def run(items):
-        return items, jax.device_get(_batch(_stack([it[2] for it in items]), _stack([it[3] for it in items]),
-                                            options.settings))
+        units, series = _stack([it[2] for it in items]), _stack([it[3] for it in items])
+        played = programs.call("_batch", _batch, units, series, options.settings)
+        return items, _Played(*jax.device_get(played))
 
     order = sorted(groups.values(), key=len, reverse=True)
     results: dict = {}
@@ -232,7 +244,7 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
 
 
 def _plant_playback(pm: PlantModel, rs: list) -> PlantPlayback:
-    """The plant's playback: its units' (PlaybackResult, host arrays) MBASE-weighted sum."""
+    """The plant's playback: its units' (:class:`_Played`) MBASE-weighted sum."""
     w = pm.mbase_mva / np.sum(pm.mbase_mva)
     omega_s = float(pm.units[0].unit.machine.omega_s_rad_s)
     return PlantPlayback(p_pu=sum(wk * r.p_pu for wk, r in zip(w, rs)),
