@@ -98,6 +98,7 @@ def _program(folder: Path, name: str, fn: Callable, treedef, static, leaves) -> 
         fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
             fh.write(program.serialize())
+        os.chmod(tmp, 0o644)   # as JAX's cache entries (mkstemp makes it private)
         os.replace(tmp, path)
     with _LOCK:
         return _LOADED.setdefault(key, program)
