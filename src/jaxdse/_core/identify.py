@@ -270,8 +270,12 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     # The regression's inputs of the recording and of the bootstrap's draws, vmapped (one copy).
     every = jax.tree_util.tree_map(lambda x, *xs: jnp.concatenate([jnp.asarray(x)[None], *xs]), fe,
                                    *(() if draws is None else (draws.front_ends,)))
+    # The governor's quiet stretch from the recording; each bootstrap draw its own mean over it.
+    lead_ = min(lead, ts.shape[0] - 2)
+    quiet = _quiet_samples(fe, governor_input(fe, plant, smoothing, lead), dt, lead_,
+                           jnp.round(settings.qss_window_s / dt))
     signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead,
-                                                settings.qss_window_s))(every)
+                                                settings.qss_window_s, quiet))(every)
     signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
@@ -333,8 +337,16 @@ def _fit_without(normal, rhs, j: int):
                      jnp.where(keep, rhs, 0.0))
 
 
+def governor_input(fe: FrontEnd, plant: Plant, smoothing, lead: int):
+    """The governor model's input [pu]: the measured speed deviation, held at its value at
+    ``lead`` before it, low-passed forwards and backwards (zero phase) by ``smoothing``."""
+    x2 = jnp.where(jnp.arange(fe.x2_meas.shape[0]) < lead, fe.x2_meas[lead], fe.x2_meas)
+    x2 = filter_states(smoothing, x2)[:, 0]
+    return filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
+
+
 def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int = 0,
-             start_s: float = 0.0):
+             start_s: float = 0.0, quiet=None):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
     Tm - Tm(0); and Tm(0) [pu].
 
@@ -353,10 +365,9 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
     def held(x):
         return jnp.where(jnp.arange(x.shape[0]) < lead, x[lead], x)
 
-    x2 = filter_states(smoothing, held(fe.x2_meas))[:, 0]
-    dw = filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
+    dw = governor_input(fe, plant, smoothing, lead)
     lead_ = min(lead, dw.shape[0] - 2)
-    x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, jnp.round(start_s / dt))
+    x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, jnp.round(start_s / dt), quiet)
     t_m = held(jnp.pad(governor_torque(plant.governor, dw[lead_:], dt, t_ref, x0), (lead_, 0)))
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
     bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (held(fe.f_hz) - plant.machine.f_nominal_hz))
@@ -553,10 +564,10 @@ def _heun(gov: AbstractGovernor, dt, t_ref):
     return step
 
 
-def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: int, samples):
+def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: int, samples, quiet=None):
     """The governor model's state at sample ``start``: its equilibrium for the mean speed of the
     quiet stretch that follows (up to the first event, :func:`_quiet_samples`; at most
-    ``samples``, T_ref's quasi-steady window).
+    ``samples``, T_ref's quasi-steady window; ``quiet``: its length where already known).
 
     Not the equilibrium of the first sample's speed: the governor's state carries the speed's
     past, which ambient wander and oscillations leave near their mean, while one sample sits off
@@ -568,7 +579,8 @@ def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: in
     backwards in time, to weigh the speed by the governor's own memory, gave the same H on
     OSL case 1 but doubles the phase error under an oscillation.)
     """
-    quiet = _quiet_samples(fe, dw, dt, start, samples)
+    if quiet is None:
+        quiet = _quiet_samples(fe, dw, dt, start, samples)
     use = fe.valid[start:] & (jnp.arange(dw.shape[0] - start) < quiet)
     mean = jnp.sum(jnp.where(use, dw[start:], 0.0)) / jnp.maximum(jnp.sum(use), 1)
     return gov.steady_state(t_ref, mean)

@@ -52,6 +52,7 @@ from .identify import (
     _fit_without,
     _heun,
     _result,
+    governor_input,
     governor_start,
     refit_spread,
     solve_spd,
@@ -190,10 +191,7 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     if carry is None:   # at rest at the segment's first own sample
         t_ref = reference_torque(ts, fe, gov, settings)   # the batch fit's, as far as the slice goes
         x2_prev, smooth0 = x2[0], jnp.stack([x2[0], 0.0])
-        # the batch fit's governor input over the slice (low-passed forwards and backwards)
-        held = jnp.where(jnp.arange(ts.shape[0]) < lead, fe.x2_meas[lead], fe.x2_meas)
-        dw_start = filter_states(smoothing, filter_states(smoothing, held)[:, 0],
-                                 reverse=True)[:, 0] / m.omega_s
+        dw_start = governor_input(fe, plant, smoothing, lead)   # the batch fit's, over the slice
         gov0 = governor_start(gov, fe, dw_start, dt, t_ref, lead, ts.shape[0])
         dw_prev = dw_start[lead]
         t_m0, elapsed = gov.torque(gov0, dw_prev), jnp.zeros((), jnp.int32)
@@ -238,7 +236,8 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
                     zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w),
                     count=jnp.sum(w))
     new = Carry(context=next_context(fe, ctx, size), filters=last, signals=u[:, -1],
-                smooth=smooth[size - 1], x2=x2[-1], governor=jax.tree_util.tree_map(lambda x: x[-1], gov_states),
+                smooth=smooth[size - 1], x2=x2[-1],
+                governor=jax.tree_util.tree_map(lambda x: x[-1], gov_states),
                 dw=dw[-1], t_ref=t_ref, t_m0=t_m0, elapsed=elapsed + size)
     return blocks, new
 
