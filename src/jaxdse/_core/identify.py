@@ -275,7 +275,7 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     quiet = _quiet_samples(fe, governor_input(fe, plant, smoothing, lead), dt, lead_,
                            jnp.round(settings.qss_window_s / dt))
     signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead,
-                                                settings.qss_window_s, quiet))(every)
+                                                quiet))(every)
     signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
@@ -345,10 +345,10 @@ def governor_input(fe: FrontEnd, plant: Plant, smoothing, lead: int):
     return filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
 
 
-def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int = 0,
-             start_s: float = 0.0, quiet=None):
+def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int, quiet):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
-    Tm - Tm(0); and Tm(0) [pu].
+    Tm - Tm(0); and Tm(0) [pu]. The governor model starts at :func:`governor_start` over the
+    recording's ``quiet`` samples after ``lead``.
 
     Without a frequency channel, f would be the smoothed derivative of theta: then the bus
     term is 0 and the rotor term is delta itself (x2 = d delta/dt, differentiated exactly by
@@ -356,7 +356,7 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
 
     The samples before ``lead`` (the derivative's half width: there x2 and a derived f are
     one-sided differences) are held at their value at ``lead``, so that the filters and the
-    governor model start there, at rest, as the windowed fit's do at its first own sample. On
+    governor model start there, as the windowed fit's do at its first own sample. On
     NASPI OSL case 1, before the readers masked its 4 stale opening frames (every |V| steps by
     2 % at 0.133 s), the governor started from the edge's speed (-0.065 rad/s, 13 times the
     noise) and the filters from the stale Te (0.018 pu off): a slow HYGOV transient that the
@@ -367,7 +367,7 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
 
     dw = governor_input(fe, plant, smoothing, lead)
     lead_ = min(lead, dw.shape[0] - 2)
-    x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, jnp.round(start_s / dt), quiet)
+    x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, quiet=quiet)
     t_m = held(jnp.pad(governor_torque(plant.governor, dw[lead_:], dt, t_ref, x0), (lead_, 0)))
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
     bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (held(fe.f_hz) - plant.machine.f_nominal_hz))
@@ -564,10 +564,11 @@ def _heun(gov: AbstractGovernor, dt, t_ref):
     return step
 
 
-def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: int, samples, quiet=None):
+def governor_start(gov: AbstractGovernor, fe: FrontEnd, dw, dt, t_ref, start: int, samples=None,
+                   quiet=None):
     """The governor model's state at sample ``start``: its equilibrium for the mean speed of the
     quiet stretch that follows (up to the first event, :func:`_quiet_samples`; at most
-    ``samples``, T_ref's quasi-steady window; ``quiet``: its length where already known).
+    ``samples``, T_ref's quasi-steady window; or ``quiet`` samples, where already known).
 
     Not the equilibrium of the first sample's speed: the governor's state carries the speed's
     past, which ambient wander and oscillations leave near their mean, while one sample sits off
