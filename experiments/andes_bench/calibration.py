@@ -131,8 +131,7 @@ def main():
         events = jd.stack_events(series)
         t0 = time.perf_counter()
         rk = jd.rank(wrong, specs, events, fit, cal)
-        free = [s for s, ok in zip(specs, rk.identifiable) if ok]
-        dec = jd.calibrate_where_rejected(wrong, free, events, fit, cal)
+        dec = jd.calibrate_where_rejected(wrong, specs, events, fit, cal, free=rk.identifiable)
         res = dec.fit
         wall = time.perf_counter() - t0
         got = {lab: float(v) for lab, v in zip(res.labels, res.values) if lab in dec.changed}
@@ -165,7 +164,8 @@ def main():
         for draw in range(args.draws if with_noise else 0):
             ev_n = jd.stack_events([noisy(s, 1000 * k + 10 * draw + e) for e, s in enumerate(series)])
             t0 = time.perf_counter()
-            rn = jd.calibrate(wrong, free, ev_n, fit, cal)      # the joint fit whose intervals decide
+            # the joint fit whose intervals decide
+            rn = jd.calibrate(wrong, specs, ev_n, fit, cal, free=rk.identifiable)
             for lab, v, ci in zip(rn.labels, rn.values, rn.ci95):
                 x_true = true_x[lab]
                 cover.append({"case": case, "unit": tag, "draw": draw, "parameter": lab, "true": x_true,

@@ -432,7 +432,8 @@ def test_calibration_changes_only_what_the_events_reject(monkeypatch):
              ParameterSpec("machine", "d_pu", "D", 0.0, 20.0, positive=False))
     fits = []
 
-    def fake_fit(unit, free, events, settings, cal):
+    def fake_fit(unit, specs, events, settings, cal, free):
+        free = [s for s, f in zip(specs, free) if f]
         fits.append([s.label for s in free])
         x0 = np.array([{"H": 5.0, "D": 0.0}[s.label] for s in free])
         x = np.array([{"H": 4.0, "D": 0.01}[s.label] for s in free])

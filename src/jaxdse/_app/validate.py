@@ -190,9 +190,10 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         notes = list(um.notes)
         specs = parameter_specs(um.unit, um.models, opts, notes)
         ranking = rank(um.unit, specs, events, fit_settings, cal)
-        free = [s for s, ok in zip(specs, ranking.identifiable) if ok]
-        progress.step(f"{p.name}: ranked {len(specs)} parameter(s), {len(free)} identifiable")
-        decision = calibrate_where_rejected(um.unit, free, events, fit_settings, cal) if free else None
+        free = ranking.identifiable
+        progress.step(f"{p.name}: ranked {len(specs)} parameter(s), {int(free.sum())} identifiable")
+        decision = (calibrate_where_rejected(um.unit, specs, events, fit_settings, cal, free=free)
+                    if free.any() else None)
         progress.step(f"{p.name}: " + ("nothing identifiable" if decision is None else
                                        f"changed {', '.join(decision.changed) or 'nothing'}"))
         after_unit = um.unit if decision is None else decision.unit

@@ -36,7 +36,6 @@ The eigen-decompositions and inverses of the small (p x p) matrices run on the h
 from __future__ import annotations
 
 import dataclasses
-from functools import partial
 from typing import NamedTuple
 
 import equinox as eqx
@@ -345,13 +344,15 @@ def _rms_pq(unit, events, settings):
     return jnp.sqrt(s / jnp.maximum(jnp.sum(events.weight), 1.0))
 
 
-def _values(z, specs):
-    return jnp.stack([_from_z(z[j], s) for j, s in enumerate(specs)])
+def _values(z, specs, x0, free):
+    """The parameters at ``z``: the free ones from their coordinates, the others held at ``x0``
+    (exactly: the coordinates' round trip is not)."""
+    return jnp.where(free, jnp.stack([_from_z(z[j], s) for j, s in enumerate(specs)]), x0)
 
 
 def _fit_residuals(z, args):
-    unit, specs, events, sigma, settings = args
-    return residuals(_values(z, specs), unit, specs, events, sigma, settings)
+    unit, specs, events, sigma, settings, x0, free = args
+    return residuals(_values(z, specs, x0, free), unit, specs, events, sigma, settings)
 
 
 @eqx.filter_jit
@@ -367,22 +368,28 @@ def _input_noise_residuals(values, unit, specs, events: Events, sigma, settings,
 
 
 def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings = PlaybackSettings(),
-              cal: CalibrationSettings = CalibrationSettings()) -> Calibration:
-    """Bounded output-error fit of ``specs`` (identifiable ones) to ``events``, with intervals."""
+              cal: CalibrationSettings = CalibrationSettings(), free=None) -> Calibration:
+    """Bounded output-error fit to ``events``, with intervals, of the parameters of ``specs``
+    that ``free`` marks (bools over ``specs``; all by default); the others stay at the unit's
+    values. Every traced program (the fit, the Jacobian, the input draws) depends on ``specs``,
+    not on ``free``: fits of other subsets of the same ``specs`` reuse them."""
     sigma = noise_level(events, cal.noise_floor_pu)
     specs = tuple(specs)
-    x0 = np.array([float(s.value(unit)) for s in specs])
-    z0 = jnp.asarray([_to_z(v, s) for v, s in zip(x0, specs)])
+    free = np.ones(len(specs), bool) if free is None else np.asarray(free, bool)
+    x_all = np.array([float(s.value(unit)) for s in specs])
+    z0 = jnp.asarray([_to_z(v, s) for v, s in zip(x_all, specs)])
     solver = optx.LevenbergMarquardt(rtol=cal.rtol, atol=cal.atol)
     sol = optx.least_squares(_fit_residuals, solver, z0,
-                             args=(unit, specs, events, jnp.asarray(sigma), settings),
+                             args=(unit, specs, events, jnp.asarray(sigma), settings,
+                                   jnp.asarray(x_all), jnp.asarray(free)),
                              max_steps=cal.max_steps, throw=False)
-    values = partial(_values, specs=specs)
-    x = np.asarray(values(sol.value))
-    fitted = with_values(unit, specs, x)
+    x_fit = np.asarray(_values(sol.value, specs, x_all, free))
+    fitted = with_values(unit, specs, x_fit)
     r, jac, scale = jacobian(fitted, specs, events, sigma, settings)
+    jac, scale = jac[:, free], scale[free]
+    x0, x = x_all[free], x_fit[free]
     n_ev, n_t = events.p_pu.shape
-    p = len(specs)
+    p = len(x)
     a_inv = np.linalg.pinv(jac.T @ jac, rcond=1e-14)
     # the residuals' part: a sandwich with their long-run covariance (P and Q rows per frame)
     res = r.reshape(n_ev, 2, n_t)
@@ -401,10 +408,11 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     if cal.input_draws > 1:
         rng = np.random.default_rng(cal.seed)
         eps = rng.standard_normal((cal.input_draws, n_ev, n_t, 2)) * v_noise
-        r_draws = np.asarray(_input_noise_residuals(jnp.asarray(x), fitted, specs, events, jnp.asarray(sigma),
-                                                    settings, jnp.asarray(eps)))
+        r_draws = np.asarray(_input_noise_residuals(jnp.asarray(x_fit), fitted, specs, events,
+                                                    jnp.asarray(sigma), settings, jnp.asarray(eps)))
         steps = -(r_draws - r[None]) @ jac @ a_inv.T
         cov = cov + np.cov(steps, rowvar=False).reshape(p, p)
+    specs = tuple(s for s, f in zip(specs, free) if f)
     half = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0)) * scale
     positive = np.array([s.positive for s in specs])
     half = np.where(positive, np.hypot(half, cal.model_error * np.abs(x)), half)
@@ -469,29 +477,32 @@ class Decision(NamedTuple):
 
 def calibrate_where_rejected(unit: DyrUnit, specs, events: Events,
                              settings: PlaybackSettings = PlaybackSettings(),
-                             cal: CalibrationSettings = CalibrationSettings()) -> Decision:
+                             cal: CalibrationSettings = CalibrationSettings(), free=None) -> Decision:
     """Calibrate, then change only what the events reject, never making an event worse.
 
-    1. fit ``specs`` (the identifiable parameters); a parameter whose .dyr value lies inside
-       its 95 % interval is consistent with the .dyr and is put back; the others are fitted
-       again alone, until every one left is rejected;
+    1. fit the parameters of ``specs`` that ``free`` marks (the identifiable ones; all by
+       default); a parameter whose .dyr value lies inside its 95 % interval is consistent
+       with the .dyr and is put back; the others are fitted again alone, until every one left
+       is rejected (each fit reuses the first one's programs, see :func:`calibrate`);
     2. the change is kept only if the joint cost (squared residuals over the noise level, all
        events) falls by more than noise alone would give (:func:`noise_threshold`);
     3. it is refused if any event's cost rises by more than that: a fit that trades one event
        against another is a model error, not a better value.
     """
     specs = tuple(specs)
+    mask = np.ones(len(specs), bool) if free is None else np.array(free, bool)
     sigma = jnp.asarray(noise_level(events, cal.noise_floor_pu))
     before = np.asarray(_event_costs(unit, events, sigma, settings))
-    status = {s.label: "consistent with the .dyr" for s in specs}
-    free, first, fit = list(specs), None, None
-    while free:
-        fit = calibrate(unit, free, events, settings, cal)
+    status = {s.label: "consistent with the .dyr" for s, f in zip(specs, mask) if f}
+    first, fit = None, None
+    while mask.any():
+        fit = calibrate(unit, specs, events, settings, cal, free=mask)
         first = first or fit
-        rejected = [s for s, x0, ci in zip(free, fit.dyr_values, fit.ci95) if not ci[0] <= x0 <= ci[1]]
-        if len(rejected) == len(free):
+        inside = np.array([ci[0] <= x0 <= ci[1] for x0, ci in zip(fit.dyr_values, fit.ci95)])
+        if not inside.any():
             break
-        free = rejected
+        mask[np.flatnonzero(mask)[inside]] = False
+    free = [s for s, f in zip(specs, mask) if f]
     if not free:
         return Decision(unit, [], status, fit, first, before, before, noise_threshold(0, 0.0), None)
     after = np.asarray(_event_costs(fit.unit, events, sigma, settings))
