@@ -108,7 +108,10 @@ def block() -> str:
             + "; 95 % intervals cover the truth in "
             f"{s['coverage_percent_all']:.1f} % of {s['noisy_draws']} noisy draws over {s['noisy_machines']} "
             f"machines (H: "
-            f"{s['coverage_percent_H']:.1f} %).")
+            f"{s['coverage_percent_H']:.1f} %)"
+            + (f"; one noise-free calibration (ranking, joint fit, refit of the rejected ones) "
+               f"{s['median_wall_s_per_calibration']:.0f} s, median" if "median_wall_s_per_calibration" in s
+               else "") + ".")
     osl = load("experiments/naspi_osl_case1/dyr_playback.json")
     if osl:
         s = osl["summary"]
