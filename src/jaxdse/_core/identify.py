@@ -270,12 +270,13 @@ def identify_front(recording: Recording, fe: FrontEnd, t_ref, plant: Plant, conf
     # The regression's inputs of the recording and of the bootstrap's draws, vmapped (one copy).
     every = jax.tree_util.tree_map(lambda x, *xs: jnp.concatenate([jnp.asarray(x)[None], *xs]), fe,
                                    *(() if draws is None else (draws.front_ends,)))
-    # The governor's quiet stretch from the recording; each bootstrap draw its own mean over it.
-    lead_ = min(lead, ts.shape[0] - 2)
-    quiet = _quiet_samples(fe, governor_input(fe, plant, smoothing, lead), dt, lead_,
+    # The governor's input of each; its quiet stretch from the recording's, each bootstrap draw
+    # its own mean over it.
+    dws = jax.vmap(lambda f: governor_input(f, plant, smoothing, lead))(every)
+    quiet = _quiet_samples(fe, dws[0], dt, min(lead, ts.shape[0] - 2),
                            jnp.round(settings.qss_window_s / dt))
-    signals, t_m0 = jax.vmap(lambda f: _signals(f, recording, plant, t_ref, smoothing, dt, lead,
-                                                quiet))(every)
+    signals, t_m0 = jax.vmap(lambda f, dw: _signals(f, dw, recording, plant, t_ref, dt, lead,
+                                                    quiet))(every, dws)
     signals, draw_signals, t_m0 = signals[0], signals[1:], t_m0[0]
 
     def fit(disc, sig):
@@ -345,10 +346,10 @@ def governor_input(fe: FrontEnd, plant: Plant, smoothing, lead: int):
     return filter_states(smoothing, x2, reverse=True)[:, 0] / plant.machine.omega_s
 
 
-def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing, dt, lead: int, quiet):
+def _signals(fe: FrontEnd, dw, recording: Recording, plant: Plant, t_ref, dt, lead: int, quiet):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
-    Tm - Tm(0); and Tm(0) [pu]. The governor model starts at :func:`governor_start` over the
-    recording's ``quiet`` samples after ``lead``.
+    Tm - Tm(0); and Tm(0) [pu]. The governor model, driven by ``dw`` (:func:`governor_input`),
+    starts at :func:`governor_start` over the recording's ``quiet`` samples after ``lead``.
 
     Without a frequency channel, f would be the smoothed derivative of theta: then the bus
     term is 0 and the rotor term is delta itself (x2 = d delta/dt, differentiated exactly by
@@ -365,7 +366,6 @@ def _signals(fe: FrontEnd, recording: Recording, plant: Plant, t_ref, smoothing,
     def held(x):
         return jnp.where(jnp.arange(x.shape[0]) < lead, x[lead], x)
 
-    dw = governor_input(fe, plant, smoothing, lead)
     lead_ = min(lead, dw.shape[0] - 2)
     x0 = governor_start(plant.governor, fe, dw, dt, t_ref, lead_, quiet=quiet)
     t_m = held(jnp.pad(governor_torque(plant.governor, dw[lead_:], dt, t_ref, x0), (lead_, 0)))
