@@ -400,7 +400,7 @@ def test_records_in_con_order(tmp_path):
 BAD = [
     ("IEESGO", IEESGO_CONS[:-1], "10 constants, expected 11"),
     ("WSIEG1", WSIEG1_CONS + (0,), "37 constants, expected 36"),
-    ("IEESGO", IEESGO_CONS[:3] + (0.0,) + IEESGO_CONS[4:], "t4_s must be > 0"),
+    ("IEESGO", IEESGO_CONS[:3] + (0.0,) + IEESGO_CONS[4:], "IEESGO bus .*: T4 must be > 0"),
     ("IEESGO", IEESGO_CONS[:9] + (0.0, 0.5), "PMAX"),
     ("WSIEG1", WSIEG1_CONS[:-1] + (5,), "IBLOCK must be 0, 1, 2 or 3"),
     ("WSIEG1", WSIEG1_CONS[:27] + (0.9,) + WSIEG1_CONS[28:], "GV1 < GV2"),

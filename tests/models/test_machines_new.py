@@ -505,6 +505,6 @@ def test_bad_record_values_are_refused(tmp_path):
     bad = list(ROU_CONS)
     bad[0] = 0.0                                                       # T'do = 0
     rec = _dyr(tmp_path, [_line(1, "GENTPJ", bad)]).records[0]
-    with pytest.raises(ValueError, match="td0_1_s must be > 0") as e:
+    with pytest.raises(ValueError, match="GENTPJ: T'do must be > 0") as e:
         machine_from_dyr(rec.model, rec.params)
     assert "\n" not in str(e.value)

@@ -16,7 +16,7 @@ from .._io.psse import (
     DyrData,
     DyrRecord,
     RawCase,
-    governor_from_dyr,
+    governor_module,
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
@@ -117,7 +117,7 @@ def unit_model(dyr: DyrData, raw: RawCase, bus: int, machine_id: str, *,
                     out.notes.append(f"{record_label(rec)}: remote-bus input taken at the terminal")
                 parts[kind] = stab
             else:
-                parts[kind] = governor_from_dyr(rec, mbase_mva=gen.mbase_mva)
+                parts[kind] = governor_module(rec, mbase_mva=gen.mbase_mva)
         except (ValueError, KeyError, TypeError) as err:
             msg = str(err).splitlines()[0] if str(err) else type(err).__name__
             out.missing.append(f"{record_label(rec)}: {msg}")

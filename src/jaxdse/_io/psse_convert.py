@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass
 from pathlib import Path
 
+from .._models.base import record_message
 from .._models.governors import GOVERNORS, AbstractGovernor
 from .errors import InputError
 from .psse_dyr import GOVERNOR_PARAMETERS, MACHINE_FIELDS, DyrData, DyrRecord
@@ -343,11 +344,21 @@ def governor_from_dyr(record: DyrRecord, *, mbase_mva: float | None = None) -> A
 
     ``mbase_mva`` (the machine's MBASE) is used by GGOV1 when Trate > 0 (its signals are then
     on the Trate base: ``base_ratio`` = Trate/MBASE). Invalid parameters (e.g. a zero time
-    constant PSS/E does not allow) raise :class:`InputError` naming the record.
+    constant PSS/E does not allow) raise :class:`InputError` naming the record and the CON.
     """
+    try:
+        return governor_module(record, mbase_mva=mbase_mva)
+    except ValueError as e:
+        raise record.error(str(e).removeprefix(f"{record.model}: ")) from None
+
+
+def governor_module(record: DyrRecord, *, mbase_mva: float | None = None) -> AbstractGovernor:
+    """:func:`governor_from_dyr` raising a plain one-line ``ValueError`` that starts with the
+    model and names its CONs (``TGOV1: T1 must be > 0, got -0.05``), for a caller that labels
+    the record itself."""
     model = GOVERNORS.get(record.model)
     if model is None:
-        raise record.error(f"is not a supported governor model ({', '.join(GOVERNORS)})")
+        raise ValueError(f"{record.model} is not a supported governor model ({', '.join(GOVERNORS)})")
     p = record.params
     kwargs = {f: p[name] for f, name in GOVERNOR_PARAMETERS[record.model].items()}
     try:
@@ -359,8 +370,10 @@ def governor_from_dyr(record: DyrRecord, *, mbase_mva: float | None = None) -> A
                 ratio = p["Trate"] / mbase_mva
             kwargs.update(rselect=int(p["Rselect"]), flag=int(p["Flag"]), base_ratio=ratio)
         return model(**kwargs)
-    except ValueError as e:
-        raise record.error(str(e)) from None
+    except ValueError as e:  # name the CONs as the record does
+        names = {**GOVERNOR_PARAMETERS[record.model], "rselect": "Rselect", "flag": "Flag",
+                 "base_ratio": "Trate/MBASE"}
+        raise ValueError(record_message(str(e), record.model, names)) from None
 
 
 def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
@@ -379,7 +392,8 @@ def load_unit(dyr: DyrData, raw: RawCase, bus: int, machine_id: str):
 __all__ = [
     "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "ROUND_ROTOR", "SALIENT_POLE",
     "MachineTransientData", "generator_label",
-    "governor_from_dyr", "load_unit", "machine_kwargs", "machine_problems", "machine_warnings",
+    "governor_from_dyr", "governor_module", "load_unit", "machine_kwargs", "machine_problems",
+    "machine_warnings",
     "q_axis_problems",
     "record_label", "transformer_kwargs", "transformer_sides", "transient_data",
 ]

@@ -15,6 +15,8 @@ Conventions (all models):
 from __future__ import annotations
 
 import abc
+import re
+from collections.abc import Mapping
 from typing import NamedTuple
 
 import equinox as eqx
@@ -103,4 +105,20 @@ class AbstractStabiliser(eqx.Module):
         """VOTHSG [pu], limited and voltage-cut-off as the model defines."""
 
 
-__all__ = ["AbstractExciter", "AbstractStabiliser", "ExciterInputs", "StabiliserInputs"]
+def record_message(message: str, model: str, names: Mapping[str, str]) -> str:
+    """A model's one-line ``ValueError`` message in the words of its PSS/E record: every field
+    named as the record names it (``names``: field -> PSS/E constant, e.g. ``td0_1_s`` ->
+    ``T'do``), and ``MODEL: `` in front. ``GENROU.td0_1_s must be > 0, got -1.0`` becomes
+    ``GENROU: T'do must be > 0, got -1.0``; ``TE (t_e_s)`` becomes ``TE``."""
+    text = str(message).splitlines()[0] if str(message) else "invalid constants"
+    for field, con in sorted(names.items(), key=lambda kv: -len(kv[0])):
+        text = text.replace(f"{con} ({field})", con)
+        text = re.sub(rf"\b\w+\.{re.escape(field)}\b", lambda _m, c=con: c, text)
+        if "_" in field or any(ch.isdigit() for ch in field):   # a field name, never a word
+            text = re.sub(rf"(?<![\w'.]){re.escape(field)}\b", lambda _m, c=con: c, text)
+    text = re.sub(rf"^{re.escape(model)}: ", "", text)
+    return f"{model}: {text}"
+
+
+__all__ = ["AbstractExciter", "AbstractStabiliser", "ExciterInputs", "StabiliserInputs",
+           "record_message"]

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._core.fields import as_float, check_nonnegative, check_positive, concrete
+from .base import record_message
 
 
 class Terminal(NamedTuple):
@@ -732,17 +733,27 @@ MACHINES = {"GENROU": GENROU, "GENSAL": GENSAL, "GENCLS": GENCLS, "GENROE": GENR
             "GENSAE": GENSAE, "GENTPJ": GENTPJ}
 
 
+MACHINE_PARAMETERS = {
+    "td0_1_s": "T'do", "td0_2_s": "T''do", "tq0_1_s": "T'qo", "tq0_2_s": "T''qo", "h_s": "H",
+    "d_pu": "D", "xd_pu": "Xd", "xq_pu": "Xq", "xd1_pu": "X'd", "xq1_pu": "X'q", "x2_pu": "X''d",
+    "xl_pu": "Xl", "s10": "S(1.0)", "s12": "S(1.2)", "kis": "Kis", "ra_pu": "ZSORCE R (.raw)",
+    "x1_pu": "ZSORCE X (.raw)", "omega_s_rad_s": "BASFRQ (.raw)"}
+"""Field of the machine modules -> the PSS/E constant (or .raw value) it takes, for messages."""
+
+
 def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_pu: float | None = None,
                      f_nominal_hz: float = 60.0) -> AbstractMachine:
     """The machine module of a GENROU, GENSAL, GENCLS, GENROE, GENSAE or GENTPJ record
     (``params``: PSS/E names, as :class:`jaxdse.DyrRecord` holds them; GENTPJ's Kis may be
-    absent: 0); ``ra_pu``, ``x_source_pu``: the .raw ZSORCE."""
+    absent: 0); ``ra_pu``, ``x_source_pu``: the .raw ZSORCE. Invalid values raise a one-line
+    ``ValueError`` naming the PSS/E constants (``GENROU: T'do must be > 0, got -1.0``)."""
     w = 2 * jnp.pi * f_nominal_hz
     p = params
     if model == "GENCLS":
         if x_source_pu is None or not x_source_pu > 0:
             raise ValueError("GENCLS needs the source reactance ZSORCE X > 0 from the .raw")
-        return GENCLS(h_s=p["H"], d_pu=p["D"], x1_pu=x_source_pu, ra_pu=ra_pu, omega_s_rad_s=w)
+        return _from_record(GENCLS, model, h_s=p["H"], d_pu=p["D"], x1_pu=x_source_pu, ra_pu=ra_pu,
+                            omega_s_rad_s=w)
     if model not in MACHINES:
         raise ValueError(f"{model} is not a supported machine model ({', '.join(MACHINES)})")
     common = dict(td0_1_s=p["T'do"], td0_2_s=p["T''do"], tq0_2_s=p["T''qo"], h_s=p["H"], d_pu=p["D"],
@@ -750,10 +761,18 @@ def machine_from_dyr(model: str, params: dict, *, ra_pu: float = 0.0, x_source_p
                   s10=p["S(1.0)"], s12=p["S(1.2)"], ra_pu=ra_pu, omega_s_rad_s=w)
     if model in ("GENROU", "GENROE", "GENTPJ"):     # round rotor: a q-axis transient circuit too
         extra = {"kis": p.get("Kis", 0.0)} if model == "GENTPJ" else {}
-        return MACHINES[model](tq0_1_s=p["T'qo"], xq1_pu=p["X'q"], **common, **extra)
-    return MACHINES[model](**common)                # salient pole: GENSAL, GENSAE
+        return _from_record(MACHINES[model], model, tq0_1_s=p["T'qo"], xq1_pu=p["X'q"], **common, **extra)
+    return _from_record(MACHINES[model], model, **common)    # salient pole: GENSAL, GENSAE
 
 
-__all__ = ["GENCLS", "GENROE", "GENROU", "GENSAE", "GENSAL", "GENTPJ", "MACHINES", "AbstractMachine",
+def _from_record(cls, model: str, **kwargs):
+    try:
+        return cls(**kwargs)
+    except ValueError as err:
+        raise ValueError(record_message(str(err), model, MACHINE_PARAMETERS)) from None
+
+
+__all__ = ["GENCLS", "GENROE", "GENROU", "GENSAE", "GENSAL", "GENTPJ", "MACHINES", "MACHINE_PARAMETERS",
+           "AbstractMachine",
            "MachineSteady", "Terminal", "exponential_saturation", "from_dq", "machine_from_dyr",
            "saturation", "saturation_coefficients", "to_dq"]

@@ -51,7 +51,7 @@ from .._core.blocks import lag as _lag
 from .._core.blocks import lead_lag as _lead_lag
 from .._core.blocks import safe as _safe
 from .._core.fields import all_concrete, as_float, check_nonnegative, check_that
-from .base import AbstractStabiliser, StabiliserInputs
+from .base import AbstractStabiliser, StabiliserInputs, record_message
 
 INPUT_MODES = {
     1: "rotor speed deviation [pu]",
@@ -672,7 +672,10 @@ def stabiliser_from_dyr(model: str, constants: Sequence[float]) -> AbstractStabi
             x = int(round(x))
         values[name] = x
     kwargs = {f: values[name] for f, name in STABILISER_PARAMETERS[model].items()}
-    return STABILISERS[model](**kwargs)
+    try:
+        return STABILISERS[model](**kwargs)
+    except ValueError as err:  # name the CONs as the record does
+        raise ValueError(record_message(str(err), model, STABILISER_PARAMETERS[model])) from None
 
 
 __all__ = ["IEEEST", "INPUT_MODES", "PSS2A", "PSS2B", "RTF_MAX_STAGES", "ST2CUT", "STABILISERS",

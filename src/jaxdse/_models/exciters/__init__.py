@@ -45,7 +45,7 @@ import math
 from collections.abc import Sequence
 from typing import Literal
 
-from ..base import AbstractExciter
+from ..base import AbstractExciter, record_message
 from .ac import ESAC1A, ESAC6A, EXAC1, EXAC2
 from .common import rectifier_fex, saturation, saturation_product
 from .dc import ESDC1A, ESDC2A, EXDC2, IEEET1, IEEEX1
@@ -174,11 +174,8 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
         kwargs["ke_zero"] = ke_zero
     try:
         return EXCITERS[name](**kwargs)
-    except ValueError as err:
-        message = str(err).splitlines()[0] if str(err) else "invalid constants"
-        for con, attribute in zip(cons, _ATTRIBUTES[name]):  # name the CON as the record does
-            message = message.replace(f"{name}.{attribute} ", f"{name}: {con} ({attribute}) ")
-        raise ValueError(message if message.startswith(name) else f"{name}: {message}") from None
+    except ValueError as err:  # name the CONs as the record does
+        raise ValueError(record_message(str(err), name, dict(zip(_ATTRIBUTES[name], cons)))) from None
 
 
 __all__ = ["ESAC1A", "ESAC6A", "ESDC1A", "ESDC2A", "ESST1A", "ESST3A", "ESST4B", "EXAC1", "EXAC2",
