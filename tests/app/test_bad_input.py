@@ -86,6 +86,8 @@ class Case:
     recording: str = "clean"
     """"clean" (50 Hz, 25 frames/s), "us60" (60 Hz, 30 frames/s, same length) or "part60" (the
     clean plant at 60 % load)."""
+    note: str | None = None
+    """handled: words the console (stderr) must hold besides summary.json."""
     absent: tuple = ()
     """error: substrings the message must not hold (a hint for another config)."""
     known: str | None = None
@@ -128,6 +130,23 @@ def rows(fn):
         idx = fn(len(c["t"]), np.random.default_rng(0))
         return {k: v[idx] for k, v in c.items()}
     return apply
+
+
+def late(n, k, lag=3):
+    """Row order with ``k`` frames, spread over the recording, each arriving ``lag`` rows late
+    (one step back in time each)."""
+    idx = list(range(n))
+    for p in np.linspace(100, n - 100, k).astype(int):
+        idx.insert(p + lag, idx.pop(p))
+    return np.array(idx)
+
+
+def resent(n, g, k, lag=5):
+    """Row order with ``k`` frames sent again ``lag`` rows after their first copy."""
+    idx = list(range(n))
+    for p in sorted(g.choice(np.arange(50, n - 50), k, replace=False), reverse=True):
+        idx.insert(p + lag + 1, p)
+    return np.array(idx)
 
 
 def cells(column, first, last, word):
@@ -272,10 +291,21 @@ CASES = {
     "duplicated_rows": handled("40 rows repeated", "duplicate_timestamps_dropped",
                                cols=rows(lambda n, g: np.sort(np.concatenate([np.arange(n),
                                                                               g.integers(0, n, 40)])))),
-    "shuffled_rows": handled("rows in random order", "out_of_order_rows",
-                             cols=rows(lambda n, g: g.permutation(n))),
-    "reversed_rows": handled("rows in descending time", "out_of_order_rows",
-                             cols=rows(lambda n, g: np.arange(n)[::-1])),
+    "late_frames": handled("10 frames each 3 rows late (0.7 % of the steps go back)", "out_of_order_rows",
+                           cols=rows(lambda n, g: late(n, 10)), note="10 row(s) out of time order sorted"),
+    "late_frames_2_percent": error("30 frames each 3 rows late (2 % of the steps go back)", "pmu.csv",
+                                   "column 't'", "row 105", "30 of 1500 steps", "at most 1 %",
+                                   cols=rows(lambda n, g: late(n, 30))),
+    "resent_frames": handled("40 frames sent again 5 rows later", "duplicate_timestamps_dropped",
+                             cols=rows(lambda n, g: resent(n, g, 40)),
+                             note="40 row(s) with a repeated time dropped"),
+    "shuffled_rows": error("rows in random order", "pmu.csv", "column 't'", "time goes backwards",
+                           cols=rows(lambda n, g: g.permutation(n))),
+    "reversed_rows": error("rows in descending time", "pmu.csv", "column 't'", "row 3",
+                           "1500 of 1500 steps", cols=rows(lambda n, g: np.arange(n)[::-1])),
+    "time_column_reversed": error("the time column runs backwards, the rows forwards", "pmu.csv",
+                                  "column 't'", "row 3", "time goes backwards", "the time column does not "
+                                  "belong to them", cols=edit(t=lambda c: c["t"][::-1])),
     "time_jitter_2ms": handled("timestamps jitter by up to 2 ms", "non_uniform_steps",
                                cols=edit(t=lambda c: c["t"] + 2e-3 * np.random.default_rng(1).uniform(
                                    -1, 1, c["t"].size))),
@@ -517,6 +547,8 @@ def test_bad_input(name, tmp_path, recordings, clean_run):
     assert note != lookup(clean_run["data_quality"], path), f"{path!r} is the same in the clean run"
     if word is not None:
         assert word in str(note), f"{path} = {note!r} lacks {word!r}"
+    if case.note is not None:
+        assert case.note in err, f"the console does not say {case.note!r}:\n{err}"
 
 
 def test_table_has_enough_cases():

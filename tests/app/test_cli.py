@@ -155,3 +155,21 @@ def test_assessment_holds_no_host_callback(cut25, plant):
     names = set(prims(closed.jaxpr))
     assert "scan" in names and "while" in names  # the walk reaches the solver's loops
     assert not {n for n in names if "callback" in n}, names
+
+
+@pytest.mark.parametrize("argv,words", [
+    (["demo", "--duration", "-10"], ["demo: --duration -10", "10-3600 s"]),
+    (["demo", "--duration", "0"], ["demo: --duration 0"]),
+    (["demo", "--duration", "nan"], ["demo: --duration nan"]),
+    (["demo", "--duration", "1e9"], ["demo: --duration 1e+09"]),
+    (["demo", "--seed", "-1"], ["demo: --seed -1", ">= 0"]),
+    (["monitor", "examples/monitor.toml", "--duration", "0"], ["monitor: --duration 0", "> 0"]),
+    (["monitor", "examples/monitor.toml", "--duration", "inf"], ["monitor: --duration inf"]),
+])
+def test_numeric_options_out_of_range_are_one_line(argv, words, capsys):
+    """Checked before any work (nothing simulated, read or compiled): exit 2, one line."""
+    from jaxdse._app.cli import main
+
+    assert main(argv) == 2
+    line = one_line_error(capsys)
+    assert all(w in line for w in words), line

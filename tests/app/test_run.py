@@ -131,18 +131,24 @@ def test_two_second_gap_with_on_long_gap_error(tmp_path, base_columns, capsys):
     assert rc == 2 and "column 'VM'" in line and "row 702" in line and "max_gap_s" in line
 
 
-def test_duplicated_and_shuffled_timestamps(tmp_path, base_columns, capsys):
+def test_duplicated_and_late_timestamps(tmp_path, base_columns, capsys):
+    """40 frames sent again 5 rows later and 12 frames 3 rows late (0.8 % of the steps go back):
+    sorted, the repeats dropped, said on the console, and the estimate is the clean one."""
     rc, _, clean = run(tmp_path / "a", base_columns, capsys=capsys) if (tmp_path / "a").mkdir() is None \
         else None
     rng = np.random.default_rng(0)
-    idx = np.concatenate([np.arange(1501), rng.integers(0, 1501, 40)])
-    rng.shuffle(idx)
-    cols = {k: v[idx] for k, v in base_columns.items()}
+    idx = list(range(1501))
+    for p in np.linspace(100, 1400, 12).astype(int):
+        idx.insert(p + 3, idx.pop(p))
+    for p in sorted(rng.choice(np.arange(50, 1450), 40, replace=False), reverse=True):
+        idx.insert(p + 6, idx[p])
+    cols = {k: v[np.array(idx)] for k, v in base_columns.items()}
     (tmp_path / "b").mkdir()
     rc, err, s = run(tmp_path / "b", cols, capsys=capsys)
     assert rc == 0, err
     dq = s["recordings"][0]["data_quality"]
-    assert dq["duplicate_timestamps_dropped"] == 40 and dq["out_of_order_rows"] > 100
+    assert dq["duplicate_timestamps_dropped"] == 40 and dq["out_of_order_rows"] == 12
+    assert "12 row(s) out of time order sorted" in err and "40 row(s) with a repeated time dropped" in err
     e0, e1 = clean["recordings"][0], s["recordings"][0]
     assert e1["a2"] == pytest.approx(e0["a2"], rel=1e-9) and e1["H_s"] == pytest.approx(e0["H_s"], rel=1e-9)
 

@@ -195,7 +195,8 @@ def test_fault_and_format_words():
     assert pmu_sim.Fault.parse("late=0.5@40+1:unit1") == pmu_sim.Fault("late", 40.0, 1.0, 0.5, "unit1")
     assert pmu_sim.Fault.parse("error@3").stat_bits() == (0xC000, 0xC000)
     assert pmu_sim.Fault.parse("trigger=4@3").stat_bits() == (0x080F, 0x0804)
-    for bad in ("error", "nope@1", "late@1", "time-quality=9@1", "error@x"):
+    for bad in ("error", "nope@1", "late@1", "time-quality=9@1", "error@x", "drop@-5+2", "drop@5+0",
+                "late=-1@5+1", "late=0@5", "error=3@5", "drop@nan"):
         with pytest.raises(ValueError):
             pmu_sim.Fault.parse(bad)
     fmt = pmu_sim.Format.parse("rect,phasor=int,freq=int")
@@ -253,6 +254,24 @@ def test_command_line_refuses_bad_input_in_one_line(recording, capsys):
     assert main(["pmu-sim", str(recording[0]), "--fault", "nope@1"]) == 2
     err = capsys.readouterr().err
     assert err.startswith("jaxdse: error: pmu-sim: fault 'nope@1': unknown kind") and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("args,words", [
+    (["--fault", "drop@-5+2"], ["fault 'drop@-5+2'", "START", ">= 0"]),
+    (["--fault", "drop@5+0"], ["fault 'drop@5+0'", "DURATION > 0"]),
+    (["--fault", "error@1000+2"], ["--fault error@1000+2", "recording's end", "--loop"]),
+    (["--speed", "0"], ["--speed 0"]), (["--speed", "inf"], ["--speed inf"]),
+    (["--duration", "-1"], ["--duration -1"]), (["--port", "-1"], ["--port -1"]),
+    (["--tile", "0"], ["--tile 0"]), (["--tile", "100000"], ["--tile 100000", "at most"]),
+    (["--start", "-5"], ["--start", "SOC"]),
+])
+def test_out_of_range_options_and_faults_are_one_line(recording, capsys, args, words):
+    from jaxdse._app.cli import main
+
+    assert main(["pmu-sim", str(recording[0]), *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("jaxdse: error: ") and err.count("\n") == 1 and "Traceback" not in err, err
+    assert all(w in err for w in words), err
 
 
 def test_loop_continues_the_grid_from_a_given_start(source):

@@ -8,6 +8,7 @@ User mistakes end in a one-line error on stderr and exit status 2, never a trace
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 from pathlib import Path
@@ -447,6 +448,21 @@ examples:
 
 
 STRICT_HELP = "exit with status 3 when any unit's verdict is not 'identified'"
+DEMO_SECONDS = (10.0, 3600.0)
+"""The demo's recording length: the event at its middle, at least 5 s either side; at most an
+hour (90 001 frames a recording)."""
+
+
+def _in_range(command: str, option: str, value, low, high, what: str, low_open: bool = False) -> None:
+    """A numeric option outside [low, high] (``low_open``: above low), or not finite: one line."""
+    from .._io.errors import InputError
+
+    if value is None:
+        return
+    ok = math.isfinite(value) and (low is None or (value > low if low_open else value >= low)) \
+        and (high is None or value <= high)
+    if not ok:
+        raise InputError(command, f"{option} {value:g}: out of range; give {what}")
 
 
 def _strict(args, units: list[dict]) -> int:
@@ -522,8 +538,7 @@ def _monitor(args) -> int:
     from .._io.errors import InputError
     from .._stream.monitor import Monitor, load_monitor
 
-    if args.duration is not None and not args.duration > 0:
-        raise InputError("monitor", f"--duration {args.duration} must be positive")
+    _in_range("monitor", "--duration", args.duration, 0.0, None, "seconds > 0", low_open=True)
     summary = Monitor(load_monitor(args.config), Path(args.out) if args.out else None).run(args.duration)
     d = summary["delay_s"]
     print(f"jaxdse monitor: {summary['updates']} update(s) in {summary['wall_s']:.0f} s"
@@ -535,6 +550,9 @@ def _monitor(args) -> int:
 def _demo(args) -> int:
     from .demo import run_demo
 
+    _in_range("demo", "--duration", args.duration, DEMO_SECONDS[0], DEMO_SECONDS[1],
+              f"{DEMO_SECONDS[0]:g}-{DEMO_SECONDS[1]:g} s")
+    _in_range("demo", "--seed", args.seed, 0, None, "a whole number >= 0")
     run_demo(Path(args.out), duration_s=args.duration, seed=args.seed)
     return 0
 

@@ -26,7 +26,7 @@ import numpy as np
 from .._core.assess import Assessment
 from .._core.verdict import NOTES
 from .._io.errors import InputError
-from .._io.measurement import condition
+from .._io.measurement import condition, order_note
 from .._io.readers import load_table
 from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
@@ -71,6 +71,8 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
             continue
         quality["segments"] = len(segments)
         units.append((p, segments[0][1], segments[0][0], quality))
+        if note := order_note(quality):
+            progress.note(f"jaxdse: note: {p.name}: {note}")
         progress.step(f"read {p.name}")
     if not units:
         raise first_error

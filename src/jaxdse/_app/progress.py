@@ -24,3 +24,8 @@ class Progress:
         else:
             self.stream.write(line + "\n")
         self.stream.flush()
+
+    def note(self, line: str):
+        """A line of its own between steps (the bar, on a terminal, is drawn again at the next)."""
+        self.stream.write(("\r\033[K" if self.tty else "") + line + "\n")
+        self.stream.flush()

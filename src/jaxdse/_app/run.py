@@ -16,7 +16,7 @@ from .._core.settings import Settings
 from .._core.verdict import NOTES
 from .._io.config import RunConfig
 from .._io.errors import InputError
-from .._io.measurement import read_measurement
+from .._io.measurement import order_note, read_measurement
 from .._many.batch import estimate_batch
 from .._many.runner import Unit, assess_units, planned_calls
 from .._many.sweep import sweep_configs
@@ -26,7 +26,7 @@ from .progress import Progress
 from .report import format_table, plot_estimates, summary_entry, write_estimates_csv, write_summary
 
 
-def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -> dict:
+def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=None) -> dict:
     """Estimate every generator of ``cfg``; write summary.json, CSVs and figures; return the summary.
 
     The online estimator runs first (one batched call per group of recordings that share a
@@ -36,10 +36,13 @@ def run_config(cfg: RunConfig, out_dir: Path | None = None, stream=sys.stderr) -
     warning on ``stream``.
     """
     out_dir = Path(out_dir) if out_dir is not None else cfg.out_dir
+    stream = stream or sys.stderr   # the stderr of the moment (a caller may redirect it)
     t_start = time.perf_counter()
     units, gens, qualities = [], [], []
     for g in cfg.generators:
         segments, quality = read_measurement(g.measurement, g.plant.machine)
+        if note := order_note(quality):
+            print(f"jaxdse: note: {g.name}: {note}", file=stream)
         if g.notes:   # plant data outside their typical range, used as given
             quality["plant_data"] = list(g.notes)
         for k, (t0, rec) in enumerate(segments):

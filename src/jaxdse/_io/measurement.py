@@ -7,7 +7,9 @@ Applied at the edge, in NumPy, in this order:
    config does not map are ignored, whatever they hold, and listed (``unmapped_columns``);
 2. time: seconds, milliseconds or timestamps (ISO 8601, or ``time_format``, in ``timezone``);
    rows with no time are dropped, out-of-order rows sorted, duplicated timestamps dropped
-   (the first row is kept); the frame rate must lie in 1-240 frames/s;
+   (the first row is kept); a recording whose time goes back at more than
+   ``MAX_OUT_OF_ORDER`` (1 %) of its steps is refused (rows running backwards or shuffled, or
+   a time column that does not belong to them); the frame rate must lie in 1-240 frames/s;
 3. units: voltage kV/V phase-to-phase or phase-to-ground or pu, current A/kA/pu, angles
    deg/rad, converted to pu of the system base (``s_base_mva``, ``v_base_kv`` phase-to-phase);
    three-phase -> positive sequence; current direction -> generator convention; frequency
@@ -51,6 +53,9 @@ from .._core.sequence import positive_sequence
 from .errors import InputError
 from .readers import FORMATS, CsvOptions, Table, load_table
 
+MAX_OUT_OF_ORDER = 0.01
+"""Largest fraction of a recording's steps (between successive distinct times, in file order)
+that may go back in time: such rows are sorted and reported; more is refused (InputError)."""
 VOLTAGE_UNITS = {"kv_ll": (1e3, False), "kv_ln": (1e3, True), "v_ll": (1.0, False),
                  "v_ln": (1.0, True), "pu": (None, False)}
 """unit -> (volts per unit, phase-to-ground?)."""
@@ -292,7 +297,7 @@ def condition(table: Table, spec: MeasurementSpec, machine: Machine | None = Non
 
     keep = np.isfinite(t)
     q["rows_without_time"] = int(np.sum(~keep))
-    q["out_of_order_rows"] = int(np.sum(np.diff(t[keep]) < 0))
+    _check_time_order(t, keep, rownum, src, names["time"], q)
     order = np.flatnonzero(keep)[np.argsort(t[keep], kind="stable")]
     t = t[order]
     dup = np.concatenate([[False], np.diff(t) == 0])
@@ -350,6 +355,47 @@ def _frequency_hz(values, spec: MeasurementSpec):
     scale = FREQUENCY_UNITS[spec.frequency_unit.lower()]
     f = np.asarray(values, dtype=float) * (spec.f_nominal_hz if scale is None else scale)
     return f + spec.f_nominal_hz if spec.frequency_kind == "deviation" else f
+
+
+def _check_time_order(t, keep, rownum, src, name, q):
+    """Count the rows where time goes backwards (``out_of_order_rows``: steps back between
+    successive distinct times in file order; a repeat of an earlier time, a frame sent twice,
+    is a duplicate, not a step back) and refuse a recording that is mostly out of order: more
+    than ``MAX_OUT_OF_ORDER`` of its steps going back is no longer a few late frames or files
+    joined in the wrong order but rows that run backwards, are shuffled, or a time column that
+    does not belong to its rows, and sorting would estimate on a recording that never was."""
+    tk, rk = t[keep], rownum[keep]
+    _, first = np.unique(tk, return_index=True)
+    first = np.sort(first)                      # the first row of each time, in file order
+    back = np.flatnonzero(np.diff(tk[first]) < 0)
+    q["out_of_order_rows"] = int(back.size)
+    if back.size:
+        q["out_of_order_first_row"] = int(rk[first[back[0] + 1]])
+    steps = max(first.size - 1, 1)
+    if back.size > MAX_OUT_OF_ORDER * steps:
+        j, k = first[back[0]], first[back[0] + 1]
+        raise InputError(src, f"time goes backwards at {back.size} of {steps} steps "
+                         f"({100 * back.size / steps:.0f} %), the first from {tk[j]:g} s (row {rk[j]}) "
+                         f"to {tk[k]:g} s: the rows run backwards, are shuffled, or the time column "
+                         "does not belong to them; jaxdse sorts a recording only where at most "
+                         f"{100 * MAX_OUT_OF_ORDER:g} % of the steps go back (late frames, files "
+                         "joined out of order): if the rows are right, sort the file by time first",
+                         column=name, row=int(rk[k]))
+
+
+def order_note(q: dict) -> str | None:
+    """The console line for what the time handling changed (sorted rows, dropped duplicates,
+    rows without time), or None: summary.json has the counts, the console says it too."""
+    parts = []
+    if q.get("out_of_order_rows"):
+        parts.append(f"{q['out_of_order_rows']} row(s) out of time order sorted (the first at row "
+                     f"{q['out_of_order_first_row']})")
+    if q.get("duplicate_timestamps_dropped"):
+        parts.append(f"{q['duplicate_timestamps_dropped']} row(s) with a repeated time dropped "
+                     "(the first kept)")
+    if q.get("rows_without_time"):
+        parts.append(f"{q['rows_without_time']} row(s) without a time dropped")
+    return f"{q['file']}: " + "; ".join(parts) if parts else None
 
 
 def _check_stuck(raw, src, names):

@@ -69,6 +69,9 @@ DEFAULT_LEAD_S = 60.0
 INT_HEADROOM = 1.25
 """Integer phasors: the scale puts the largest magnitude of the recording at 1/1.25 of 32767."""
 UDP_MAX = 65507
+MIN_STATION_BYTES = 14
+"""The fewest bytes a station takes in a data frame (STAT 2, two integer phasors 8, integer FREQ
+and DFREQ 4): more stations than FRAMESIZE (65535) allows at this size can never be served."""
 RATE_TOLERANCE = 1e-3
 """A frame rate this close to a whole number of frames per second is that number: time columns
 rounded to microseconds (0.033333 s) give 30.0003 frames/s over a short file."""
@@ -132,7 +135,7 @@ def load_source(path) -> Source:
     A unit whose recording cannot be conditioned is left out with a note when others remain
     (as ``jaxdse fleet`` does); with none left, the first error is raised (InputError)."""
     from .._io.errors import InputError
-    from .._io.measurement import condition
+    from .._io.measurement import condition, order_note
     from .._io.readers import load_table
 
     path = Path(path)
@@ -145,6 +148,8 @@ def load_source(path) -> Source:
                                time_column=spec.columns.get("time"))
             segments, quality = condition(table, spec, machine)
             parts.append((name, spec, segments, quality, _first_time(table, spec, quality)))
+            if note := order_note(quality):
+                notes.append(f"{name}: {note}")
         except InputError as err:
             first_error = first_error or err
             notes.append(f"{name}: not served ({err})")
@@ -386,6 +391,8 @@ class Fault:
     """0: the one frame at ``start_s``."""
     value: float | None = None
     station: str | None = None
+    text: str = dataclasses.field(default="", compare=False)
+    """As written on the command line (for messages)."""
 
     @classmethod
     def parse(cls, text: str) -> Fault:
@@ -404,7 +411,23 @@ class Fault:
         if kind in limits and value_f is not None and not (value_f.is_integer()
                                                              and 0 <= value_f <= limits[kind]):
             raise ValueError(f"fault {text!r}: {kind}'s code is a whole number 0-{limits[kind]}")
-        return cls(kind, float(start), float(dur or 0.0), value_f, station)
+        try:
+            start_s, duration_s = float(start), float(dur) if dur is not None else 0.0
+        except ValueError:
+            raise ValueError(f"fault {text!r}: START and DURATION are seconds, e.g. drop@30+2") from None
+        if not (math.isfinite(start_s) and start_s >= 0):
+            raise ValueError(f"fault {text!r}: starts at {start:s} s; START is seconds of stream time "
+                             "from the first frame, >= 0")
+        if dur is not None and not (math.isfinite(duration_s) and duration_s > 0):
+            raise ValueError(f"fault {text!r}: lasts {dur} s; give DURATION > 0, or leave +DURATION "
+                             "out for the one frame at START")
+        if kind == "late" and not (math.isfinite(value_f) and value_f > 0):
+            raise ValueError(f"fault {text!r}: late={value}: the delay is seconds > 0")
+        if value is not None and kind not in (*limits, "late", "config-change"):
+            raise ValueError(f"fault {text!r}: {kind} takes no value (write {kind}@{start}...)")
+        if kind == "config-change" and value_f is not None and not (math.isfinite(value_f) and value_f >= 0):
+            raise ValueError(f"fault {text!r}: config-change={value}: the lead is seconds >= 0")
+        return cls(kind, start_s, duration_s, value_f, station, text.strip())
 
     def covers(self, t: float, half_frame: float) -> bool:
         if self.duration_s <= 0:
@@ -945,23 +968,37 @@ def main(args, stream=None) -> int:
         fmt = Format.parse(args.format)
     except ValueError as err:
         raise InputError("pmu-sim", str(err)) from None
-    for name, value, ok in (("--speed", args.speed, args.speed > 0),
-                            ("--tile", args.tile, args.tile >= 1),
-                            ("--idcode", args.idcode, 1 <= args.idcode <= 65534),
-                            ("--time-base", args.time_base, 1 <= args.time_base <= 0xFFFFFF),
-                            ("--duration", args.duration, args.duration is None or args.duration > 0)):
+    for name, value, ok, what in (
+            ("--speed", args.speed, math.isfinite(args.speed) and args.speed > 0, "a number > 0"),
+            ("--tile", args.tile, args.tile >= 1, "a whole number >= 1"),
+            ("--port", args.port, 0 <= args.port <= 65535, "0-65535 (0: any free port)"),
+            ("--idcode", args.idcode, 1 <= args.idcode <= 65534, "1-65534 (C37.118 IDCODE)"),
+            ("--time-base", args.time_base, 1 <= args.time_base <= 0xFFFFFF, "1-16777215 (24 bits)"),
+            ("--duration", args.duration, args.duration is None
+             or (math.isfinite(args.duration) and args.duration > 0), "seconds > 0")):
         if not ok:
-            raise InputError("pmu-sim", f"{name} {value} is out of range")
-    source = tile(load_source(args.recording), args.tile)
+            raise InputError("pmu-sim", f"{name} {value}: out of range; give {what}")
+    source = load_source(args.recording)
+    if len(source.stations) * args.tile * MIN_STATION_BYTES > c3.MAX_FRAME:
+        raise InputError("pmu-sim", f"--tile {args.tile}: {len(source.stations) * args.tile} stations "
+                         f"cannot fit one data frame (at least {MIN_STATION_BYTES} bytes each, "
+                         f"FRAMESIZE at most {c3.MAX_FRAME}); give at most "
+                         f"{c3.MAX_FRAME // (MIN_STATION_BYTES * len(source.stations))}")
+    source = tile(source, args.tile)
     for note in source.notes:
         log(f"note: {note}")
     start = args.start
     if start not in ("now", "recording"):
         start = _parse_start(start)
+    end_s = source.frames / source.rate
     for f in faults:
         if f.station is not None and f.station not in [s.name for s in source.stations]:
             raise InputError("pmu-sim", f"--fault {f.kind}@{f.start_s:g}: no station {f.station!r}; "
                              f"the stations: {', '.join(s.name for s in source.stations)}")
+        if not args.loop and f.start_s >= end_s:
+            raise InputError("pmu-sim", f"--fault {f.text}: starts at {f.start_s:g} s, at or after the "
+                             f"recording's end ({end_s:g} s of stream time); without --loop the stream "
+                             "ends there")
     try:
         server = PmuServer(source, host=args.host, port=args.port, udp=args.udp, idcode=args.idcode, fmt=fmt,
                            speed=args.speed, loop=args.loop, duration=args.duration, faults=faults,
@@ -996,9 +1033,13 @@ def _parse_start(text: str) -> float:
     from .._io.errors import InputError
 
     try:
-        return float(int(text))
+        soc = float(int(text))
     except ValueError:
         pass
+    else:
+        if not 0 <= soc < 2 ** 32:
+            raise InputError("--start", f"{text}: seconds since 1970 (C37.118 SOC) lie in 0-{2 ** 32 - 1}")
+        return soc
     import pandas as pd
 
     try:
