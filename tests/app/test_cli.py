@@ -4,6 +4,7 @@ cache folder, and no host callback in the compiled assessment."""
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -173,3 +174,43 @@ def test_numeric_options_out_of_range_are_one_line(argv, words, capsys):
     assert main(argv) == 2
     line = one_line_error(capsys)
     assert all(w in line for w in words), line
+
+
+def _help(argv, capsys) -> str:
+    from jaxdse._app.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--help"])
+    assert e.value.code == 0
+    return capsys.readouterr().out
+
+
+def test_help_lists_match_the_registries_and_readme(capsys):
+    """--help names the .raw revisions and every model jaxdse simulates from the registries, as
+    README does; the top-level help shows the planner's path check -> fleet -> validate -> monitor."""
+    from jaxdse._io.psse import MACHINE_FIELDS, SUPPORTED_RAW_REVISIONS
+    from jaxdse._models.exciters import EXCITERS
+    from jaxdse._models.governors import GOVERNORS
+    from jaxdse._models.machines import MACHINES
+    from jaxdse._models.stabilisers import STABILISERS
+
+    revs = f"{min(SUPPORTED_RAW_REVISIONS)}-{max(SUPPORTED_RAW_REVISIONS)}"
+    top = _help([], capsys)
+    path = top.split("a planner's path")[1].split("examples:")[0]
+    steps = [path.index(f"jaxdse {c} ") for c in ("check", "fleet", "validate", "monitor")]
+    assert steps == sorted(steps), path
+    assert revs in path and "jaxdse demo" in top and "jaxdse run" in top and "jaxdse tune" in top
+    readme = (ROOT / "README.md").read_text()
+    simulated = [*MACHINES, *EXCITERS, *STABILISERS, *GOVERNORS]
+    for command in ("fleet", "check"):
+        text = _help([command], capsys)
+        assert "{" + "RAW_REVISIONS}" not in text and "{SIMULATED}" not in text and "rev 32/33" not in text
+        assert f"rev {revs}" in text, command
+        listed = text.split("Models jaxdse simulates")[1].split("\n\n")[0]
+        missing = [m for m in simulated if not re.search(rf"\b{m}\b", listed)]
+        assert not missing, f"{command} --help lacks {missing}"
+    fleet = _help(["fleet"], capsys).split("Records the estimator's plant is built from")[1].split("\n\n")[0]
+    assert all(re.search(rf"\b{m}\b", fleet) for m in [*MACHINE_FIELDS, *GOVERNORS]), fleet
+    assert f"revision {min(SUPPORTED_RAW_REVISIONS)}" in readme
+    not_in_readme = [m for m in simulated if not re.search(rf"\b{m}\b", readme)]
+    assert not not_in_readme, f"README does not list {not_in_readme}"

@@ -20,6 +20,13 @@ Lorenz-Meyer, Suchantke & Schiffer (arXiv:2203.14623): mapping substation phasor
 machine terminal, an algebraic observer, a DREM parameter estimator, an I&I speed observer
 and event playback.
 
+a planner's path through a PSS/E case (.raw revisions {RAW_REVISIONS}, .dyr):
+  jaxdse check CASE.toml --out DIR      1. does every unit start at rest and settle? no recordings
+  jaxdse fleet FLEET.toml --out DIR     2. H and D of every plant from PMU recordings; model validation
+  jaxdse validate FLEET.toml --out DIR  3. validate and calibrate the units' own .dyr records (MOD-026-2)
+  jaxdse monitor MONITOR.toml           4. H and D of every unit each second from live PMU streams
+  (`jaxdse pmu-sim` serves a recording as a live C37.118 stream to try the monitor on.)
+
 examples:
   jaxdse demo --out jaxdse_demo                       built-in simulated data, truth known
   jaxdse run examples/csv_positive_sequence.toml      your own recording (CSV/COMTRADE/MAT)
@@ -93,7 +100,7 @@ get a one-line warning on stderr either way.
 
 example:
   jaxdse run examples/csv_positive_sequence.toml --out out/
-  jaxdse run examples/isone_mat.toml --strict          # exit 3 unless every unit is identified
+  jaxdse run examples/isone_mat.toml --strict   # exit 3 unless every unit is identified; needs ../shared/data
 """
 
 
@@ -161,13 +168,15 @@ example:
 FLEET_HELP = """\
 Estimate H and D of every plant of a PSS/E case from PMU recordings, in one batched call, and
 write a model-validation report a planner can file. Plant data come from the case: the
-in-service units with a machine record (GENCLS, GENSAL, GENROU, GENTPJ) on a bus form one
-plant on their summed MBASE; its reference H is the MBASE-weighted H of those records; its
-governor is the MBASE-weighted sum of the units' own TGOV1, IEEEG1, GAST, HYGOV or GGOV1
-(units without one hold their torque). Models the .dyr has beyond these are listed, not fatal.
+in-service units with a machine record on a bus form one plant on their summed MBASE; its
+reference H is the MBASE-weighted H of those records; its governor is the MBASE-weighted sum
+of the units' own governor records (units without one hold their torque). Models the .dyr has
+beyond these are listed, not fatal.
+
+{FLEET_MODELS}
 
 FLEET.toml (paths relative to it):
-  [case]         raw = "case.raw" (PSS/E rev 32/33), dyr = "case.dyr"; q_axis_circuits = false
+  [case]         raw = "case.raw" (PSS/E rev {RAW_REVISIONS}), dyr = "case.dyr"; q_axis_circuits = false
                  leaves every GENROU/GENTPJ's q-axis circuits out of the estimator, for comparison
                  (records are used as given where their equations can be evaluated; odd values
                  are listed as data warnings on the unit's page)
@@ -193,11 +202,14 @@ FLEET.toml (paths relative to it):
                  max_rms_percent_mbase_q (2), event_s (10), ... (see fleet.json)
   [observer] [settings] [identify]   as in `jaxdse run`;  [output] figures = true
   [playback]     model = "dyr" (default: each unit's own PSS/E records, machine, exciter,
-                 stabiliser and governor, as README lists them; the recorded terminal voltage
+                 stabiliser and governor, listed below; the recorded terminal voltage
                  imposed as PSS/E PLBVFU1 does; a unit with another model plays back the
                  surrogate and its page says which record) | "surrogate" (3rd-order,
                  identified H and D; validates P/frequency only); solver = "tsit5" | "kvaerno5";
-                 substeps (first step 1/substeps of a frame; adaptive Tsit5, rtol 1e-7); ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
+                 substeps (first step 1/substeps of a frame; adaptive Tsit5, rtol 1e-7);
+                 ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
+
+{SIMULATED}
 
 DIR gets:
   DIR/report.html            fleet page: two results per unit, never merged: H's verdict and
@@ -219,7 +231,7 @@ Exit status: 0 on success; 2 on bad input (missing .raw/.dyr or recording, unkno
 plant found) with a one-line message; 3 with --strict when any unit is not identified.
 
 example:
-  jaxdse fleet experiments/naspi_osl_case1/fleet.toml --out osl_fleet/
+  jaxdse fleet experiments/naspi_osl_case1/fleet.toml --out osl_fleet/   # needs ../shared/data
   jaxdse fleet experiments/andes_bench/fleet_ieee14.toml --out ieee14/ --strict
 """
 
@@ -311,7 +323,7 @@ system chose). Exit status: 0 at the recording's end, after --duration or on Ctr
 input (the recording, a fault, the format) with a one-line message.
 
 examples:
-  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712
+  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712   # needs ../shared/data
   jaxdse pmu-sim examples/csv_positive_sequence.toml --port 0 --speed 10 --loop --duration 60 \\
       --format int,rect --fault drop@30+2 --fault error@40+5 --fault config-change=5@60
 """
@@ -384,7 +396,7 @@ examples:
   jaxdse pmu-sim examples/csv_positive_sequence.toml --port 4712 --speed 5 &
   jaxdse monitor examples/monitor.toml --out live --duration 70     # then http://127.0.0.1:8050/
   jaxdse run live/replay.toml --out replayed
-  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712 &
+  jaxdse pmu-sim experiments/naspi_osl_case1/fleet.toml --port 4712 &      # needs ../shared/data
   jaxdse monitor experiments/monitor/osl_monitor.toml --out osl --duration 95
 """
 
@@ -394,8 +406,8 @@ The first thing to run on a PSS/E dynamic case: does every synchronous unit star
 settle after a small disturbance, with the records as they are? No recordings needed.
 
 Every in-service generator with a machine record in the .dyr (a synchronous unit) gets its own
-model from its records (machine, exciter, stabiliser, governor: README lists what jaxdse
-simulates), initialised from the power flow at its terminal (the .raw PG, QG on MBASE and the
+model from its records (machine, exciter, stabiliser, governor: the models listed below),
+initialised from the power flow at its terminal (the .raw PG, QG on MBASE and the
 bus voltage VM, VA), and two runs with the terminal voltage imposed, as `jaxdse fleet` plays a
 recording back (PSS/E PLBVFU1):
 
@@ -423,11 +435,13 @@ Units of one model structure run in one compiled, vmapped call.
 
 CASE.toml: a fleet file's [case] is enough (paths relative to the file); a whole fleet file
 serves as it is (its other sections are not read):
-  [case]       raw = "case.raw" (PSS/E rev 32-36), dyr = "case.dyr" (or a list of .dyr files,
+  [case]       raw = "case.raw" (PSS/E rev {RAW_REVISIONS}), dyr = "case.dyr" (or a list of .dyr files,
                later records replacing earlier ones of the same machine and model)
   [playback]   optional: solver = "tsit5" (the check's held run and step: fixed step,
                1/(30 x substeps) s) | "kvaerno5", substeps (4: PSS/E's half-cycle step),
                ke_zero = "psse" | "literal"
+
+{SIMULATED}
 
 Prints a table (units by model chain, every unit that does not pass with its first reason,
 the counts). With --out DIR:
@@ -442,7 +456,7 @@ Exit status: 0 whatever the outcomes; 2 on unreadable input (a missing or malfor
 synchronous unit) with a one-line message.
 
 examples:
-  jaxdse check experiments/activsg2000/case.toml --out activsg2000_check/
+  jaxdse check experiments/activsg2000/case.toml --out activsg2000_check/   # needs ../shared/data
   jaxdse check experiments/andes_bench/fleet_npcc.toml
 """
 
@@ -557,10 +571,53 @@ def _demo(args) -> int:
     return 0
 
 
+def model_lists() -> dict[str, str]:
+    """The help texts' lists, from the registries: .raw revisions, and the models jaxdse
+    simulates by family (what README lists)."""
+    import textwrap
+
+    from .._io.psse import MACHINE_FIELDS, SUPPORTED_RAW_REVISIONS
+    from .._models.exciters import EXCITERS
+    from .._models.governors import GOVERNORS
+    from .._models.machines import MACHINES
+    from .._models.stabilisers import STABILISERS
+
+    revs = sorted(SUPPORTED_RAW_REVISIONS)
+    contiguous = revs == list(range(revs[0], revs[-1] + 1))
+
+    def block(title, families):
+        lines = [title]
+        for name, models in families:
+            lines += textwrap.wrap(", ".join(models), width=92, initial_indent=f"  {name:<12}",
+                                   subsequent_indent=" " * 14)
+        return "\n".join(lines)
+
+    return {
+        "RAW_REVISIONS": f"{revs[0]}-{revs[-1]}" if contiguous else ", ".join(map(str, revs)),
+        "SIMULATED": block("Models jaxdse simulates (a record of any other model is named, not guessed):",
+                           [("machines", MACHINES), ("exciters", EXCITERS), ("stabilisers", STABILISERS),
+                            ("governors", GOVERNORS)]),
+        "FLEET_MODELS": block("Records the estimator's plant is built from:",
+                              [("machines", MACHINE_FIELDS), ("governors", GOVERNORS)]),
+    }
+
+
+class _Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose help fills in the registries' lists ({RAW_REVISIONS}, {SIMULATED},
+    {FLEET_MODELS}) when it is printed: a command line that does not ask for help imports none."""
+
+    def format_help(self) -> str:
+        text = super().format_help()
+        if "{" in text:
+            for key, value in model_lists().items():
+                text = text.replace("{" + key + "}", value)
+        return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .._version import __version__
 
-    parser = argparse.ArgumentParser(prog="jaxdse", description=DESCRIPTION,
+    parser = _Parser(prog="jaxdse", description=DESCRIPTION,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--version", action="version", version=f"jaxdse {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -640,8 +697,9 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="jaxdse_demo", metavar="DIR",
                       help="output folder (default: %(default)s)")
     demo.add_argument("--duration", type=float, default=600.0, metavar="S",
-                      help="length of each recording in seconds (default: %(default)s)")
-    demo.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+                      help=f"length of each recording in seconds, {DEMO_SECONDS[0]:g}-{DEMO_SECONDS[1]:g} "
+                           "(default: %(default)s)")
+    demo.add_argument("--seed", type=int, default=0, help="random seed >= 0 (default: %(default)s)")
     demo.set_defaults(func=_demo)
     return parser
 
