@@ -54,6 +54,7 @@ from .._io.psse import (
     transient_data,
 )
 from .._io.schema import TYPICAL_MACHINE, machine_value_findings
+from .._models.base import record_message
 from .._models.governors import GOVERNORS, WeightedGovernor
 
 PT_UNLIMITED_MW = 9999.0
@@ -257,7 +258,8 @@ def generator_run(name, bus, units: list[UnitData], spec, raw: RawCase,
             q_axis = QAxisCircuits(xq1_pu=tavg("xq1_pu"), xq2_pu=tavg("xd2_pu"), xl_pu=tavg("xl_pu"),
                                    tq01_s=tavg("tq01_s"), tq02_s=tavg("tq02_s"))
         except ValueError as e:
-            notes.append(f"plant {name}: {_line(e)}: q-axis circuits left out (transient model)")
+            why = record_message(_line(e), "MBASE-weighted GENROU/GENTPJ", Q_AXIS_CONS)
+            notes.append(f"plant {name}: {why}: q-axis circuits left out (transient model)")
     machine = Machine(xd_pu=avg("xd_pu"), xq_pu=avg("xq_pu"), xd1_pu=avg("xd1_pu"),
                       td01_s=avg("td01_s"), rs_pu=avg("rs_pu"), h_s=avg("h_s"), d_pu_s=avg("d_pu_s"),
                       s_rated_mva=s, v_rated_kv=kv, f_nominal_hz=raw.basfrq_hz, q_axis=q_axis)
@@ -308,6 +310,10 @@ def _p_max(units: list[UnitData], governor, s_mva: float) -> dict:
         return {}
     p_max, source = min(found)
     return {"p_max_mw": p_max, "p_max_source": source}
+
+
+Q_AXIS_CONS = {"xq1_pu": "X'q", "xq2_pu": "X''d", "xl_pu": "Xl", "tq01_s": "T'qo", "tq02_s": "T''qo"}
+"""The fields of the estimator's q-axis circuits -> the machine records' CONs they average."""
 
 
 def _line(err) -> str:
