@@ -48,7 +48,7 @@ from .._dyr.calibrate import (
 )
 from .._dyr.playback import PlaybackSettings, play_back
 from .._io.errors import InputError
-from .._io.measurement import condition
+from .._io.measurement import condition, order_note
 from .._io.psse import GOVERNOR_FIELDS, GOVERNOR_PARAMETERS, MACHINE_FIELDS
 from .._io.readers import load_table
 from .._models.exciters import _ATTRIBUTES as EXCITER_ATTRIBUTES
@@ -112,14 +112,17 @@ def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterS
 
 # --- events -----------------------------------------------------------------------------------
 
-def _event_series(fleet: Fleet, p: FleetPlant, files: tuple, tables: dict):
+def _event_series(fleet: Fleet, p: FleetPlant, files: tuple, tables: dict, note=lambda line: None):
     """The plant's TerminalSeries (machine base) from one recording (a file, or the files
-    that share one time axis as [measurement] file lists them)."""
+    that share one time axis as [measurement] file lists them); ``note`` gets the line that
+    says what the time handling changed (sorted rows, dropped repeats), if anything."""
     spec = dataclasses.replace(p.run.measurement, file=tuple(files))
     if files not in tables:
         tables[files] = load_table(list(files), spec.format, csv_options=spec.csv_options,
                                    time_column=spec.columns.get("time"))
-    segments, _ = condition(tables[files], spec, p.run.plant.machine)
+    segments, quality = condition(tables[files], spec, p.run.plant.machine)
+    if line := order_note(quality):
+        note(f"jaxdse: note: {p.name}: {line}")
     rec = segments[0][1]
     fe = jax.jit(front_end)(rec, p.run.plant, fleet.settings)
     s = fe.v_t * jnp.conj(fe.i_t)
@@ -177,7 +180,7 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         series = []
         try:
             for r in recordings:
-                series.append(_event_series(fleet, p, r, tables))
+                series.append(_event_series(fleet, p, r, tables, progress.note))
                 progress.step(f"{p.name}: read {Path(r[0]).name}")
         except InputError as err:
             entry["skipped"] = str(err)
