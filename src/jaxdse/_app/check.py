@@ -38,6 +38,13 @@ playback imposes a recording (PSS/E PLBVFU1):
   settle at 0.5 pu and others the other way round), so the check keeps the playback's
   convention, where the verdict depends on the unit's records alone.
 
+Every generator record of the .raw is accounted for (:func:`accounting`, from
+:func:`~jaxdse._dyr.inventory.inventory`): the units (a machine record; records of a model
+jaxdse does not know, ``not supported`` naming it; exciter, stabiliser or governor records
+without a machine record, a ``data problem``) and, each with its reason, those not checked
+(out of service, no dynamic records, converter-interfaced, not a generator: SVC/STATCOM,
+duplicated); the .dyr records of no generator are listed (orphaned, bus level).
+
 Outcome per unit: ``"pass"``; ``"data problem"`` (a record jaxdse simulates but whose values
 cannot be simulated -- an inverted limit, a negative time constant, both named by the model's
 own checks -- or whose initial operating point lies outside a limit of the record, found by

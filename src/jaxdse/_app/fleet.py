@@ -178,7 +178,9 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "playback_rms_percent_mbase": _rms_percent(traces, p),
         "playback_model": validation["model"],
         **({} if dyr is None else dyr.entry(_rms_percent(_traces(a.estimate, a.replay), p))),
-        "parameters": e["parameters"],
+        # D's meaning is said once, in "damping"
+        "parameters": {k: ({f: x for f, x in v.items() if f != "meaning"} if k == "D" else v)
+                       for k, v in e["parameters"].items()},
         "units": [dataclasses.asdict(u) for u in p.members],
         "governor_models": sorted({u.governor or "none (constant torque)" for u in p.members}),
         "other_units_on_bus": list(p.others),
