@@ -542,9 +542,9 @@ def damping_section(e: dict) -> str:
         return ""
     ci = d["D_ci95_pu_torque_per_rad_s"] or [None, None]
     ci_pu = d["D_ci95_pu_torque_per_pu_speed"] or [None, None]
-    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in d["reasons"] if d["verdict"] != "identified")
+    # the verdict in words; its numbers are in the table (fleet.json "damping" has the reasons)
     return f"""<h2>Damping D of the swing equation: {_dbadge(d['verdict'])}</h2>
-<p>{html.escape(D_WORDS[d['verdict']])}</p>{f'<ul>{reasons}</ul>' if reasons else ''}
+<p>{html.escape(D_WORDS[d['verdict']])}</p>
 <p class="small">{html.escape(d['meaning'])}</p>
 <table><tr><th></th><th>value</th><th>95 % interval (measurement noise only)</th></tr>
 <tr><td>identified D [pu torque / (rad/s)]</td><td>{_f(d['D_pu_torque_per_rad_s'], '.4g')}</td>

@@ -144,7 +144,7 @@ def _reason_text(key: str, ident, online: dict) -> str:
     if key == "negative_damping" and ident is not None:
         lo, hi = (float(x) for x in ident.d_ci95)
         return (f"D = {float(ident.d_pu_s):.3g} pu torque per rad/s ({2.0 * float(ident.h_s * ident.a1):.3g} "
-                f"per pu speed) < 0 with 95 % confidence (interval {lo:.3g} to {hi:.3g}): the swing "
+                f"per pu speed) < 0 with 95 % confidence (interval {lo:.4g} to {hi:.4g}): the swing "
                 "equation needs negative damping to follow the recording; its D lumps the excitation "
                 "and stabiliser damping (an exciter's negative damping outweighing the damper "
                 "windings'), not the machine record's D")
