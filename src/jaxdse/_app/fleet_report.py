@@ -545,7 +545,7 @@ def damping_section(e: dict) -> str:
     # the verdict in words; its numbers are in the table (fleet.json "damping" has the reasons)
     return f"""<h2>Damping D of the swing equation: {_dbadge(d['verdict'])}</h2>
 <p>{html.escape(D_WORDS[d['verdict']])}</p>
-<p class="small">{html.escape(d['meaning'])}</p>
+<p><b>What this D is:</b> {html.escape(d['meaning'])}</p>
 <table><tr><th></th><th>value</th><th>95 % interval (measurement noise only)</th></tr>
 <tr><td>identified D [pu torque / (rad/s)]</td><td>{_f(d['D_pu_torque_per_rad_s'], '.4g')}</td>
 <td>{' – '.join(_f(x, '.4g') for x in ci)}</td></tr>
