@@ -13,7 +13,6 @@ are simulated share one model structure: one compile.
 """
 
 import json
-import shutil
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -142,7 +141,8 @@ def test_every_record_accounted_for(checked):
     units = {e["name"]: e for e in doc["units"]}
     unknown = units["10_1"]
     assert unknown["outcome"] == "not supported" and unknown["category"] == "machine model unknown"
-    assert unknown["not_simulated"] == ["GENSAX"] and "model GENSAX is unknown to jaxdse" in unknown["reasons"][0]
+    assert unknown["not_simulated"] == ["GENSAX"]
+    assert "model GENSAX is unknown to jaxdse" in unknown["reasons"][0]
     alone = units["11_1"]
     assert alone["outcome"] == "data problem" and "no machine record" in alone["reasons"][0]
     assert "TGOV1 (line" in alone["reasons"][0]
@@ -189,7 +189,8 @@ def test_console_table(checked):
     assert "5 synchronous, 1 machine model unknown, 1 no machine record" in lines[1]
     said = {line.split()[1]: int(line.split()[0]) for line in lines[2:7]}
     assert said == {"out": 1, "in": 2, "converter-interfaced": 1, "not": 1, "second": 1}
-    assert any("in service without dynamic records" in line and line.endswith(": 4 '1', 12 '1'") for line in lines)
+    assert any("in service without dynamic records" in line and line.endswith(": 4 '1', 12 '1'")
+               for line in lines)
     assert any("not generators" in line and "5 '1' CSVGN1" in line for line in lines)
     assert any("orphaned" in line for line in lines)
     assert any("GENROU on bus 99 id '1'" in line and "bus 99 is not in case.raw" in line for line in lines)

@@ -125,7 +125,7 @@ def test_damping_is_named_for_what_it_is(ieee14):
         text = (out / "units" / f"{u['name']}.html").read_text()
         assert "record" not in text.split("Damping D of the swing equation")[0].split("Numbers of the H")[1]
         assert "as in the GENROU record" not in text and text.count("is no estimate of it") == 1
-        assert f"Damping D of the swing equation: <span" in text and f">{u['D_verdict']}</span>" in text
+        assert "Damping D of the swing equation: <span" in text and f">{u['D_verdict']}</span>" in text
         assert "D of the machine record(s) as filed" in text
         if u["D_verdict"] == "negative":
             assert "D &lt; 0 with 95 % confidence" in text

@@ -681,7 +681,8 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
 
 
 NOT_CHECKED = {"out of service": "out of service, not checked",
-               "no dynamic records": "in service without dynamic records (no .dyr record on their bus and ID)",
+               "no dynamic records": "in service without dynamic records (no .dyr record on their bus "
+                                     "and ID)",
                "converter": "converter-interfaced sources (not synchronous machines)",
                "not a generator": "not generators: static var compensators or STATCOMs in the generator data",
                "duplicate": "second generator records for the same bus and ID (the first is used)"}

@@ -378,7 +378,8 @@ def fleet_accounting(fleet: Fleet, skipped: list[dict]) -> dict:
                            why=f"{a.why}; on the bus of plant {beside[key]} without a machine record "
                                "jaxdse knows: its current is in the plant's recorded current")
             elif (k := skipped_at.get(key, skipped_at.get((g.bus, None)))) is not None:
-                row.update(category="skipped", plant=k["name"], why=f"plant {k['name']} skipped: {k['reason']}")
+                row.update(category="skipped", plant=k["name"],
+                           why=f"plant {k['name']} skipped: {k['reason']}")
             else:
                 row.update(category="not recorded",
                            why=f"{a.why}; no plant of the fleet file found a recording of it")
@@ -397,7 +398,8 @@ def fleet_accounting(fleet: Fleet, skipped: list[dict]) -> dict:
 
 
 CSV_FIELDS = ("name", "bus", "s_mva", "governor_models", "H_s", "H_ci95_low", "H_ci95_high",
-              "H_reference_s", "H_error_percent", "D", "D_verdict", "verdict", "reasons", "smape_I_t", "smape_P_t",
+              "H_reference_s", "H_error_percent", "D", "D_verdict", "verdict", "reasons", "smape_I_t",
+              "smape_P_t",
               "rms_P_percent_mbase", "rms_Q_percent_mbase", "validation", "validation_model")
 
 

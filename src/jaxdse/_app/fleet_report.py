@@ -399,18 +399,21 @@ def accounting_section(doc: dict) -> str:
                "</summary><table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
                f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
                "</table></details>" if rows else "")
-            + (f"<p>.dyr records of no generator in the .raw (not used): {len(acc['dyr_records_not_used'])}</p>"
+            + (f"<p>.dyr records of no generator in the .raw (not used): "
+               f"{len(acc['dyr_records_not_used'])}</p>"
                "<table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th><th>id</th>"
                f"<th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>" if recs else
                "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
-            + (f"<p>.dyr records the reader could not attribute:</p><ul>{unreadable}</ul>" if unreadable else ""))
+            + (f"<p>.dyr records the reader could not attribute:</p><ul>{unreadable}</ul>"
+               if unreadable else ""))
 
 
 def _damping_line(s: dict) -> str:
     if not s.get("D_verdicts"):
         return ""
     return ("<li><b>Damping D</b> of the swing equation (all the damping the recording shows, lumped; "
-            "not the machine records' D): " + ", ".join(f"{_dbadge(v)} {n}" for v, n in s["D_verdicts"].items())
+            "not the machine records' D): "
+            + ", ".join(f"{_dbadge(v)} {n}" for v, n in s["D_verdicts"].items())
             + ".</li>")
 
 
@@ -418,7 +421,8 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     name = html.escape(e["name"])
     # D's findings are said in D's own section (damping_section)
     decisive = _decisive(e)
-    notes = [v for k, v in e["reasons"].items() if k in NOTES and k not in ("negative_damping", "d_interval_wide")]
+    notes = [v for k, v in e["reasons"].items()
+             if k in NOTES and k not in ("negative_damping", "d_interval_wide")]
     fallbacks = ("<p><b>Plant data fallbacks</b> (the .dyr records as read, and what jaxdse did):</p><ul>"
                  + "".join(f"<li>{html.escape(f)}</li>" for f in e.get("fallbacks", [])) + "</ul>"
                  if e.get("fallbacks") else "")
@@ -549,10 +553,12 @@ def damping_section(e: dict) -> str:
 <table><tr><th></th><th>value</th><th>95 % interval (measurement noise only)</th></tr>
 <tr><td>identified D [pu torque / (rad/s)]</td><td>{_f(d['D_pu_torque_per_rad_s'], '.4g')}</td>
 <td>{' – '.join(_f(x, '.4g') for x in ci)}</td></tr>
-<tr><td>identified D·ω<sub>s</sub> [pu torque / pu speed]</td><td>{_f(d['D_pu_torque_per_pu_speed'], '.4g')}</td>
+<tr><td>identified D·ω<sub>s</sub> [pu torque / pu speed]</td>
+<td>{_f(d['D_pu_torque_per_pu_speed'], '.4g')}</td>
 <td>{' – '.join(_f(x, '.4g') for x in ci_pu)}</td></tr>
 <tr><td>for comparison only: D of the machine record(s) as filed (MBASE-weighted) [pu torque / pu speed]</td>
-<td>{_f(d['records_D_pu_torque_per_pu_speed'], '.4g')}</td><td>– (the record's value, not an estimate)</td></tr>
+<td>{_f(d['records_D_pu_torque_per_pu_speed'], '.4g')}</td>
+<td>– (the record's value, not an estimate)</td></tr>
 </table>"""
 
 

@@ -13,7 +13,16 @@ from .._core.assess import Assessment
 from .._core.estimate import Replay
 from .._core.identify import Identified, condition_number
 from .._core.result import Estimate
-from .._core.verdict import D_MEANING, D_VERDICTS, FINDINGS, NOTES, REASONS, VERDICTS, describe, online_verdict
+from .._core.verdict import (
+    D_MEANING,
+    D_VERDICTS,
+    FINDINGS,
+    NOTES,
+    REASONS,
+    VERDICTS,
+    describe,
+    online_verdict,
+)
 
 
 def _playback(est: Estimate, rep: Replay | None):

@@ -154,8 +154,9 @@ def inventory(raw: RawCase, dyr: DyrData) -> Inventory:
         if (r.bus, r.id.strip().upper()) in keys:
             continue
         if r.model in BUS_MODELS:
-            records.append(RecordAccount(r, "bus level", f"{record_label(r)}: a model of the bus or "
-                                         "plant, not of one machine; not used"))
+            where = f"{Path(r.source).name or '.dyr'} line {r.line}"
+            records.append(RecordAccount(r, "bus level", f"{r.model} {r.id!r} on bus {r.bus} ({where}): a "
+                                         "model of the bus or plant, not of one machine; not used"))
         elif r.bus not in raw.buses:
             records.append(RecordAccount(r, "orphaned", f"{record_label(r)}: bus {r.bus} is not in "
                                          f"{name}; not used"))
