@@ -392,7 +392,7 @@ def fleet_accounting(fleet: Fleet, skipped: list[dict]) -> dict:
         raise AssertionError(f"generator records not accounted for: {out}")
     s = inv.summary()
     out.update({k: s[k] for k in ("dyr_records_orphaned", "dyr_records_bus_level", "dyr_records_unreadable")})
-    return {"summary": out, "generators_not_in_fleet": rows,
+    return {"summary": out, "categories": dict(FLEET_NOT_IN), "generators_not_in_fleet": rows,
             "dyr_records_not_used": [r.as_dict() for r in inv.records],
             "dyr_records_unreadable": list(inv.unreadable)}
 

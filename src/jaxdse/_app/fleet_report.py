@@ -374,14 +374,12 @@ average (sMAPE) is reported, never judged.</p>
 def accounting_section(doc: dict) -> str:
     """Every generator record of the case: the counts (they add up to the .raw's), each one not
     in the fleet with its reason, and the .dyr records of no generator."""
-    from .fleet import FLEET_NOT_IN
-
     acc = doc.get("accounting")
     if acc is None:
         return ""
     a = acc["summary"]
     items = [f"<li><b>{a['in_fleet']}</b> units of the plants estimated above</li>"]
-    items += [f"<li><b>{a[k]}</b> {html.escape(w)}</li>" for k, w in FLEET_NOT_IN.items() if a[k]]
+    items += [f"<li><b>{a[k]}</b> {html.escape(w)}</li>" for k, w in acc["categories"].items() if a[k]]
     rows = "".join(
         f"<tr><td>{r['bus']}</td><td>{html.escape(r['id'])}</td><td>{r['line']}</td>"
         f"<td>{html.escape(r['category'])}</td><td>{html.escape(' '.join(r['models']) or '–')}</td>"
