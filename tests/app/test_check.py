@@ -2,13 +2,17 @@
 
 A case of five units from the ANDES bench (ieee14) with three records made bad: an exciter with
 an inverted limit (VIMAX below VIMIN), a governor whose VMAX lies below the unit's initial
-valve position, and an exciter model jaxdse does not simulate (EXST2). Its check.json fields,
-the exit status, the console table; the case loader; the limits found at the initial state.
-The three units that are simulated share one model structure: one compile.
+valve position, and an exciter model jaxdse does not simulate (EXST2). Eight more generator
+records, one of each kind the check accounts for: a machine record of a model jaxdse does not
+know (GENSAL renamed GENSAX), a governor record without a machine record, an out-of-service
+unit, a generator without dynamic records, a static var compensator (CSVGN1), a converter
+(REGCA1/REECA1), a second record of one generator; and .dyr records of no generator (a bus
+not in the .raw, an ID not on its bus, a USRBUS). Its check.json fields, the exit status, the
+console table; the case loader; the limits found at the initial state. The three units that
+are simulated share one model structure: one compile.
 """
 
 import json
-import shutil
 from pathlib import Path
 
 import jax.numpy as jnp
@@ -24,8 +28,8 @@ from jaxdse._models.governors import IEEEG1
 BENCH = Path(__file__).resolve().parents[2] / "experiments" / "andes_bench" / "data" / "ieee14"
 
 
-def _case(tmp_path: Path, dyr_edit=lambda text: text, toml="") -> Path:
-    shutil.copy(BENCH / "ieee14.raw", tmp_path / "case.raw")
+def _case(tmp_path: Path, dyr_edit=lambda text: text, toml="", raw_edit=lambda text: text) -> Path:
+    (tmp_path / "case.raw").write_text(raw_edit((BENCH / "ieee14.raw").read_text()))
     (tmp_path / "case.dyr").write_text(dyr_edit((BENCH / "ieee14.dyr").read_text()))
     path = tmp_path / "case.toml"
     path.write_text('[case]\nraw = "case.raw"\ndyr = "case.dyr"\n' + toml)
@@ -45,10 +49,38 @@ def _bad(text: str) -> str:
     return "\n".join(lines) + "\n"
 
 
+GEN = "{bus}, '{id}', 10, 0, 10, -10, 1.0, 0, 100, 0, 0.3, 0, 0, 1, {stat}, 100, 50, 0, 1, 1\n"
+EXTRA_GENERATORS = {(10, "1", 1): "GENSAX (renamed GENSAL): machine model unknown",
+                    (11, "1", 1): "TGOV1 alone: no machine record",
+                    (3, "2", 0): "out of service, with a machine record",
+                    (4, "1", 1): "no dynamic records",
+                    (5, "1", 1): "CSVGN1: not a generator",
+                    (9, "1", 1): "REGCA1, REECA1: converter",
+                    (12, "1", 1): "no dynamic records",
+                    (12, "1", 1, "again"): "its second record: duplicate"}
+EXTRA_RECORDS = """10 'GENSAX' 1 5 0.05 0.1 3 0 1.8 1.7 0.3 0.2 0.15 0.1 0.3 /
+10 'SEXS' 1 0.1 10 100 0.1 0 3 /
+11 'TGOV1' 1 0.05 0.05 1.05 0.3 1 2.1 0 /
+3 'GENROU' 2 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
+5 'CSVGN1' 1 5 0.1 0.05 100 0.01 1 0 100 /
+9 'REGCA1' 1 1 0.02 10 0.9 0.5 1.22 1.2 0.8 0.4 -1.3 0.02 0 -99 99 0.7 /
+9 'REECA1' 1 0 0 0 0 0.9 1.1 0 0 0 0 0.1 -0.1 0 0 1 -1 0 0 0 1 0 0 1 /
+99 'GENROU' 1 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
+13 'GENROU' 7 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
+14 'USRBUS' 'PLNTBU1' 504 0 7 28 7 15 14 13 14 '1' 0 1 /
+"""
+
+
+def _more(text: str) -> str:
+    """The eight generator records of ``EXTRA_GENERATORS`` after the five of the case."""
+    rows = "".join(GEN.format(bus=k[0], id=k[1], stat=k[2]) for k in EXTRA_GENERATORS)
+    return text.replace("0 / End of Generator data", rows + "0 / End of Generator data")
+
+
 @pytest.fixture(scope="module")
 def checked(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("check")
-    case = _case(tmp, _bad, '[playback]\nke_zero = "literal"\n')
+    case = _case(tmp, lambda t: _bad(t) + EXTRA_RECORDS, '[playback]\nke_zero = "literal"\n', _more)
     return main(["check", str(case), "--out", str(tmp / "out")]), tmp / "out"
 
 
@@ -57,7 +89,7 @@ def test_outcomes_reasons_and_json(checked):
     assert rc == 0  # whatever the outcomes
     doc = json.loads((out / "check.json").read_text())
     units = {e["name"]: e for e in doc["units"]}
-    assert set(units) == {"1_1", "2_1", "3_1", "6_1", "8_1"}
+    assert set(units) == {"1_1", "2_1", "3_1", "6_1", "8_1", "10_1", "11_1"}
     for e in doc["units"]:
         assert {"name", "bus", "id", "models", "outcome", "reasons"} <= set(e)
         assert set(e["models"]) == {"machine", "exciter", "stabiliser", "governor"}
@@ -85,12 +117,61 @@ def test_outcomes_reasons_and_json(checked):
     assert low["limits"][0]["con"] == "VMAX" and low["limits"][0]["bound"] == 0.25
     assert any(r.startswith("hence: not steady at t = 0") for r in low["reasons"])
     s = doc["summary"]
-    assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (5, 2, 2, 1, 0)
-    assert s["not_supported_models"] == {"EXST2": 1}
+    assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (7, 2, 3, 2, 0)
+    assert s["not_supported_models"] == {"EXST2": 1, "GENSAX": 1}
     assert s["data_problems"]["TGOV1 VMAX (valve0 above)"] == 1
     assert s["compiled_programs"] == 1  # the simulated units share one structure
     page = (out / "check.html").read_text()
     assert "sortable" in page and "EXST2" in page and "data problem" in page
+
+
+def test_every_record_accounted_for(checked):
+    """Each generator record of the .raw in one category, the sums equal to the .raw's count;
+    the unknown machine model a unit, not supported, naming it; the orphaned records listed."""
+    _, out = checked
+    doc = json.loads((out / "check.json").read_text())
+    a = doc["summary"]["accounting"]
+    assert a["generator_records"] == 5 + len(EXTRA_GENERATORS) == 13
+    assert a["checked"] == 7 and a["checked_by_category"] == {
+        "synchronous": 5, "machine model unknown": 1, "no machine record": 1}
+    assert (a["out of service"], a["no dynamic records"], a["converter"], a["not a generator"],
+            a["duplicate"]) == (1, 2, 1, 1, 1)
+    assert a["checked"] + sum(a[k] for k in ("out of service", "no dynamic records", "converter",
+                                             "not a generator", "duplicate")) == 13
+    units = {e["name"]: e for e in doc["units"]}
+    unknown = units["10_1"]
+    assert unknown["outcome"] == "not supported" and unknown["category"] == "machine model unknown"
+    assert unknown["not_simulated"] == ["GENSAX"]
+    assert "model GENSAX is unknown to jaxdse" in unknown["reasons"][0]
+    alone = units["11_1"]
+    assert alone["outcome"] == "data problem" and "no machine record" in alone["reasons"][0]
+    assert "TGOV1 (line" in alone["reasons"][0]
+    assert doc["summary"]["data_problems"]["no machine record"] == 1
+    rows = {(r["bus"], r["id"], r["category"]) for r in doc["not_checked"]}
+    assert rows == {(3, "2", "out of service"), (4, "1", "no dynamic records"),
+                    (12, "1", "no dynamic records"), (12, "1", "duplicate"),
+                    (5, "1", "not a generator"), (9, "1", "converter")}
+    assert all(r["why"] and r["line"] > 0 for r in doc["not_checked"])
+    recs = {(r["model"], r["bus"], r["id"]): r for r in doc["dyr_records_not_used"]}
+    assert set(recs) == {("GENROU", 99, "1"), ("GENROU", 13, "7"), ("USRBUS", 14, "PLNTBU1")}
+    assert recs[("GENROU", 99, "1")]["category"] == "orphaned" and recs[("GENROU", 99, "1")]["line"] > 0
+    assert recs[("USRBUS", 14, "PLNTBU1")]["category"] == "bus level"
+    assert (a["dyr_records_orphaned"], a["dyr_records_bus_level"]) == (2, 1)
+    page = (out / "check.html").read_text()
+    assert "Every generator record of case.raw: <b>13</b>" in page and "CSVGN1" in page
+    assert "bus 99 is not in case.raw" in page
+
+
+def test_out_of_service_units_checked_when_asked(tmp_path):
+    """``--out-of-service``: the out-of-service unit with a machine record becomes a unit; the
+    accounting still adds up (no simulation: the inventory alone)."""
+    from jaxdse._dyr.inventory import inventory
+
+    case = load_case(_case(tmp_path, lambda t: t + EXTRA_RECORDS, raw_edit=_more))
+    inv = inventory(case.raw, case.dyr)
+    assert [(a.generator.bus, a.generator.id) for a in inv.units(out_of_service=True)][-1] == (3, "2")
+    assert len(inv.units(out_of_service=True)) == len(inv.units()) + 1 == 8
+    assert sum(inv.counts().values()) == len(case.raw.generators) == 13
 
 
 def test_console_table(checked):
@@ -99,11 +180,22 @@ def test_console_table(checked):
     _, out = checked
     text = console_table(json.loads((out / "check.json").read_text()))
     lines = text.splitlines()
-    assert "5 synchronous unit(s)" in lines[0]
+    assert "13 generator record(s), 7 unit(s) checked" in lines[0]
     assert any(line.split()[:6] == ["GENROU", "ESST3A", "-", "TGOV1", "4", "2"] for line in lines)
     assert any(line.strip().startswith("2_1") and "not supported" in line for line in lines)
     assert any(line.strip().startswith("6_1") and "VMAX" in line for line in lines)
-    assert lines[-1].startswith("2 pass (40.0 %), 2 data problem, 1 not supported, 0 fail, of 5")
+    assert lines[-1].startswith("2 pass (28.6 %), 3 data problem, 2 not supported, 0 fail, of 7")
+    assert lines[1].split()[:2] == ["7", "checked"] and "2 machine model unknown" not in lines[1]
+    assert "5 synchronous, 1 machine model unknown, 1 no machine record" in lines[1]
+    said = {line.split()[1]: int(line.split()[0]) for line in lines[2:7]}
+    assert said == {"out": 1, "in": 2, "converter-interfaced": 1, "not": 1, "second": 1}
+    assert any("in service without dynamic records" in line and line.endswith(": 4 '1', 12 '1'")
+               for line in lines)
+    assert any("not generators" in line and "5 '1' CSVGN1" in line for line in lines)
+    assert any("orphaned" in line for line in lines)
+    assert any("GENROU on bus 99 id '1'" in line and "bus 99 is not in case.raw" in line for line in lines)
+    assert any("GENROU on bus 13 id '7'" in line and "no generator with ID '7' on bus 13" in line
+               for line in lines)
 
 
 @pytest.mark.parametrize("what", ["missing", "no_case", "unknown", "malformed", "no_machine", "no_file"])

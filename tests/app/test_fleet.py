@@ -102,6 +102,77 @@ def test_fleet_json_and_report(ieee14):
     s = doc["summary"]
     assert sum(s["validation"].values()) == len(names) and s["validation_models"] == {"surrogate": len(names)}
     assert "Inertia H" in head and "Model validation" in head and "{'" not in head
+    # every generator record of the case: the five, all in the fleet
+    assert doc["accounting"]["summary"]["generator_records"] == doc["accounting"]["summary"]["in_fleet"] == 5
+    assert "Every generator record of the case" in head and "<b>5</b> generator records" in head
+
+
+def test_damping_is_named_for_what_it_is(ieee14):
+    """D: what it is and is not, stated once per page, never as the record's D; its own verdict,
+    ``negative`` where its interval excludes 0 from below (B1_G1 of the line trip), on the page
+    and in fleet.json; the records' D shown beside, as the record's value."""
+    _, out, doc = ieee14
+    negative = 0
+    for u in doc["units"]:
+        d = u["damping"]
+        assert u["D_verdict"] == d["verdict"] == u["parameters"]["D"]["verdict"] in jd.D_VERDICTS
+        lo, hi = u["D_ci95"]
+        assert (u["D_verdict"] == "negative") == (hi < 0 and "negative_damping" in u["reasons"])
+        negative += u["D_verdict"] == "negative"
+        assert "not the D constant of the machine records" in d["meaning"]
+        assert d["D_pu_torque_per_pu_speed"] == pytest.approx(u["D"] * 2 * np.pi * 60)
+        assert d["records_D_pu_torque_per_pu_speed"] == 0.0   # ieee14's GENROU records: D = 0
+        text = (out / "units" / f"{u['name']}.html").read_text()
+        assert "record" not in text.split("Damping D of the swing equation")[0].split("Numbers of the H")[1]
+        assert "as in the GENROU record" not in text and text.count("is no estimate of it") == 1
+        assert "Damping D of the swing equation: <span" in text and f">{u['D_verdict']}</span>" in text
+        assert "D of the machine record(s) as filed" in text
+        if u["D_verdict"] == "negative":
+            assert "D &lt; 0 with 95 % confidence" in text
+    assert negative >= 1 and doc["summary"]["D_verdicts"].get("negative") == negative
+    assert "D's verdict" in (out / "report.html").read_text()
+
+
+def test_fleet_accounts_for_every_generator_record(tmp_path):
+    """The fleet's account of the case (no estimation: the fleet file loaded): a unit recorded
+    but skipped, one not recorded, an unknown machine model on a plant's bus, a converter, an
+    out-of-service unit, an orphaned record; they add up to the .raw's generator records."""
+    from jaxdse._app.fleet import fleet_accounting
+
+    gen = "{bus}, '{id}', 10, 0, 10, -10, 1.0, 0, 100, 0, 0.3, 0, 0, 1, {stat}, 100, 50, 0, 1, 1\n"
+    extra = {(3, "2", 1): "GENROU, H < 0: skipped", (4, "1", 1): "GENROU: not recorded",
+             (1, "2", 1): "GENSAX: unknown, on plant B1_G1's bus", (9, "1", 1): "REGCA1: converter",
+             (12, "1", 0): "out of service"}
+
+    def raw(text):
+        rows = "".join(gen.format(bus=b, id=i, stat=st) for b, i, st in extra)
+        return text.replace("0 / End of Generator data", rows + "0 / End of Generator data")
+
+    def dyr(text):
+        genrou = "'GENROU' {} 6.5 0.06 0.2 0.05 {} 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /\n"
+        return (text + "3 " + genrou.format(2, -5) + "4 " + genrou.format(1, 5) + "99 " + genrou.format(1, 5)
+                + "1 'GENSAX' 2 5 0.05 0.1 3 0 1.8 1.7 0.3 0.2 0.15 0.1 0.3 /\n9 'REGCA1' 1 1 0.02 /\n")
+
+    def units(text):   # B1's plant: every unit on the bus; the others by ID
+        body = "".join(
+            f'\n[[unit]]\nname = "B{b}_G{i}"\nbus = {b}\n' + (f'ids = ["{i}"]\n' if b != 1 else "")
+            + 'columns = {time = "time_s", '
+            + ", ".join(f'{r} = "B{b}_G1/{c}"' for r, c in (("v_mag", "VM"), ("v_ang", "VA"),
+                                                          ("i_mag", "IM"), ("i_ang", "IA"))) + "}\n"
+            for b, i in ((1, "1"), (2, "1"), (3, "1"), (3, "2"), (6, "1"), (8, "1")))
+        return text[:text.index("[channels]")] + body
+
+    fl = load_fleet(_ieee14_case(tmp_path, raw=raw, dyr=dyr, fleet=units))
+    acc = fleet_accounting(fl, list(fl.skipped))
+    a = acc["summary"]
+    assert a["generator_records"] == 10 and a["in_fleet"] == 5
+    assert (a["skipped"], a["not recorded"], a["on a plant's bus"], a["converter"], a["out of service"]) \
+        == (1, 1, 1, 1, 1)
+    rows = {(r["bus"], r["id"]): r for r in acc["generators_not_in_fleet"]}
+    assert rows[(3, "2")]["category"] == "skipped" and "H = -5 must be > 0" in rows[(3, "2")]["why"]
+    assert rows[(4, "1")]["category"] == "not recorded"
+    assert rows[(1, "2")]["plant"] == "B1_G1" and "GENSAX" in rows[(1, "2")]["why"]
+    assert [(r["bus"], r["category"]) for r in acc["dyr_records_not_used"]] == [(99, "orphaned")]
 
 
 def test_missing_dyr_exits_2_with_one_line(tmp_path, capsys):

@@ -38,6 +38,13 @@ playback imposes a recording (PSS/E PLBVFU1):
   settle at 0.5 pu and others the other way round), so the check keeps the playback's
   convention, where the verdict depends on the unit's records alone.
 
+Every generator record of the .raw is accounted for (:func:`accounting`, from
+:func:`~jaxdse._dyr.inventory.inventory`): the units (a machine record; records of a model
+jaxdse does not know, ``not supported`` naming it; exciter, stabiliser or governor records
+without a machine record, a ``data problem``) and, each with its reason, those not checked
+(out of service, no dynamic records, converter-interfaced, not a generator: SVC/STATCOM,
+duplicated); the .dyr records of no generator are listed (orphaned, bus level).
+
 Outcome per unit: ``"pass"``; ``"data problem"`` (a record jaxdse simulates but whose values
 cannot be simulated -- an inverted limit, a negative time constant, both named by the model's
 own checks -- or whose initial operating point lies outside a limit of the record, found by
@@ -68,6 +75,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._dyr.inventory import GENERATOR_CATEGORIES, Inventory, inventory
 from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings
 from .._dyr.records import UnitModel, record_kind, unit_model
 from .._dyr.unit import DyrUnit, UnitInputs
@@ -188,20 +196,15 @@ def load_case(path) -> CaseFile:
 
 def synchronous_units(raw: RawCase, dyr: DyrData, *, out_of_service: bool = False
                       ) -> tuple[list[RawGenerator], int]:
-    """The generators with a machine record, in .raw order (the first of duplicated records):
-    those in service (all with ``out_of_service``), and the number of those out of service."""
-    out, seen, off = [], set(), 0
-    for g in raw.generators:
-        key = (g.bus, g.id.strip().upper())
-        if key in seen or not any(record_kind(r) == "machine" for r in dyr.unit_records(g.bus, g.id)):
-            continue
-        seen.add(key)
-        if g.stat != 1:
-            off += 1
-            if not out_of_service:
-                continue
-        out.append(g)
-    return out, off
+    """The units of the check, in .raw order (the first of duplicated records): the in-service
+    generators with a machine record, or with .dyr records of a machine model jaxdse does not
+    know, or with exciter/stabiliser/governor records and no machine record (the categories
+    ``UNIT_CATEGORIES`` of :func:`~jaxdse._dyr.inventory.inventory`); with ``out_of_service``
+    those out of service with a machine record too. And the number of those out of service with
+    a machine record."""
+    inv = inventory(raw, dyr)
+    return ([a.generator for a in inv.units(out_of_service=out_of_service)],
+            inv.summary()["out_of_service_with_machine_record"])
 
 
 def _simulated(kind: str, model: str) -> bool:
@@ -235,6 +238,7 @@ def _static(raw: RawCase, dyr: DyrData, g: RawGenerator, ke_zero: str) -> _Stati
     models: dict = dict.fromkeys(KINDS)
     records: dict = {}
     unsupported, skip = [], set()
+    no_machine = not any(record_kind(r) == "machine" for r in recs)
     for r in recs:
         kind = record_kind(r)
         if kind in records:
@@ -243,12 +247,22 @@ def _static(raw: RawCase, dyr: DyrData, g: RawGenerator, ke_zero: str) -> _Stati
             records[kind], models[kind] = r, r.model
         if not _simulated(kind, r.model):
             skip.add(record_label(r))
+            if kind == "other" and no_machine:
+                unsupported.append((r.model, f"{record_label(r)}: model {r.model} is unknown to jaxdse "
+                                             "(not a machine, exciter, stabiliser or governor model it "
+                                             "knows), and the generator has no machine record it knows"))
+                continue
             what = kind if kind != "other" else "record (not a machine, exciter, stabiliser or governor)"
             unsupported.append((r.model, f"{record_label(r)}: {what} model {r.model} is not simulated "
                                          "by jaxdse"))
     um = unit_model(dyr, raw, g.bus, g.id, ke_zero=ke_zero)
     problems = []
     for line in um.missing:
+        if line.endswith(": no machine record"):
+            if not unsupported:   # an unknown model already says so
+                has = ", ".join(f"{r.model} (line {r.line})" for r in recs)
+                problems.append(("no machine record", f"{line} (its records: {has})"))
+            continue
         if not any(line.startswith(s) for s in skip):
             at = [r.model for r in recs if line.startswith(record_label(r))]
             problems.append((at[0] if at else None, line))
@@ -584,16 +598,22 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
     ``summary``, the runs' definition, timings)."""
     t_start = time.perf_counter()
     raw, dyr = case.raw, case.dyr
-    gens, off = synchronous_units(raw, dyr, out_of_service=out_of_service)
-    if not gens:
+    inv = inventory(raw, dyr)
+    accounts = inv.units(out_of_service=out_of_service)
+    gens = [a.generator for a in accounts]
+    off = inv.summary()["out_of_service_with_machine_record"]
+    if not any(a.has_machine or a.category == "machine model unknown" for a in accounts):
+        counts = ", ".join(f"{n} {k}" for k, n in inv.counts().items() if n)
         raise InputError(case.path, "no synchronous unit: no in-service generator of "
-                         f"{Path(raw.source).name} has a machine record in the .dyr")
+                         f"{Path(raw.source).name} has a machine record in the .dyr (its "
+                         f"{len(raw.generators)} generator record(s): {counts})")
     statics = [_static(raw, dyr, g, case.playback.ke_zero) for g in gens]
     entries = []
     groups: dict = {}
-    for g, st in zip(gens, statics):
-        e = {"name": _unit_name(g), "bus": g.bus, "id": g.id.strip(), "models": st.models,
+    for g, st, acc in zip(gens, statics, accounts):
+        e = {"name": _unit_name(g), "bus": g.bus, "id": g.id.strip(), "line": g.line, "models": st.models,
              "mbase_mva": g.mbase_mva, "pg_mw": g.pg_mw, "qg_mvar": g.qg_mvar, "in_service": g.stat == 1,
+             "category": acc.category if acc.category != "out of service" else "synchronous",
              "outcome": None, "reasons": [], "notes": [*st.model.notes, *st.warnings], "numbers": {}}
         entries.append(e)
         if st.unsupported:
@@ -639,6 +659,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
             if limits:
                 entries[k]["limits"] = limits
                 entries[k]["records_at_fault"] = [lim["record"] for lim in limits]
+    checked = {id(a) for a in accounts}
     doc = {
         "jaxdse_version": __version__,
         "source": str(case.path),
@@ -646,13 +667,79 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         "check": {**dataclasses.asdict(spec), "solver": case.playback.solver,
                   "step_s": 1.0 / (spec.frame_hz * case.playback.substeps),
                   "ke_zero": case.playback.ke_zero},
-        "summary": _summary(entries, off if not out_of_service else 0, len(order)),
+        "summary": {**_summary(entries, off if not out_of_service else 0, len(order)),
+                    "accounting": accounting(inv, entries)},
         "units": entries,
+        "not_checked": [a.as_dict() for a in inv.generators if id(a) not in checked],
+        "dyr_records_not_used": [r.as_dict() for r in inv.records],
+        "dyr_records_unreadable": list(inv.unreadable),
         "wall_time_s": time.perf_counter() - t_start,
         "group_times_s": [dt for _, _, dt in results],
     }
     _finite(doc)
     return doc
+
+
+NOT_CHECKED = {"out of service": "out of service, not checked",
+               "no dynamic records": "in service without dynamic records (no .dyr record on their bus "
+                                     "and ID)",
+               "converter": "converter-interfaced sources (not synchronous machines)",
+               "not a generator": "not generators: static var compensators or STATCOMs in the generator data",
+               "duplicate": "second generator records for the same bus and ID (the first is used)"}
+"""The categories of generator records that are not units of the check, in words."""
+
+
+def accounting(inv: Inventory, entries: list[dict]) -> dict:
+    """Every generator record of the .raw: ``checked`` (the units, by category) and each
+    category not checked; they add up to ``generator_records``. And the .dyr records of no
+    generator (orphaned, bus level, unreadable)."""
+    counts = inv.counts()
+    checked_off = sum(not e["in_service"] for e in entries)
+    by_category = Counter(e["category"] for e in entries)
+    out = {"generator_records": len(inv.generators), "checked": len(entries),
+           "checked_by_category": {k: by_category.get(k, 0) for k in GENERATOR_CATEGORIES
+                                   if by_category.get(k)},
+           **{k: counts[k] - (checked_off if k == "out of service" else 0) for k in NOT_CHECKED}}
+    if out["checked"] + sum(out[k] for k in NOT_CHECKED) != out["generator_records"]:  # a bug, not data
+        raise AssertionError(f"generator records not accounted for: {out}")
+    s = inv.summary()
+    out.update({"dyr_records_orphaned": s["dyr_records_orphaned"],
+                "dyr_records_bus_level": s["dyr_records_bus_level"],
+                "dyr_records_unreadable": s["dyr_records_unreadable"]})
+    return out
+
+
+def _accounting_lines(doc: dict, most: int = 5) -> list[str]:
+    """The console's account of every generator record and of the .dyr records of no generator."""
+    a = doc["summary"]["accounting"]
+    by = ", ".join(f"{n} {k}" for k, n in a["checked_by_category"].items())
+    lines = [f"  {a['checked']:5d} checked ({by})"]
+    for k, words in NOT_CHECKED.items():
+        rows = [r for r in doc["not_checked"] if r["category"] == k]
+        if not a[k]:
+            continue
+        extra = ""
+        if k == "out of service":
+            m = doc["summary"]["out_of_service_not_checked"]
+            extra = f" ({m} with a machine record; --out-of-service checks them)" if m else ""
+        elif rows:
+            names = ", ".join(f"{r['bus']} {r['id']!r}" + (f" {'/'.join(dict.fromkeys(r['models']))}"
+                                                            if r["models"] and k != "duplicate" else "")
+                              for r in rows[:most])
+            extra = f": {names}" + (f" (+{len(rows) - most} more)" if len(rows) > most else "")
+        lines.append(f"  {a[k]:5d} {words}{extra}")
+    recs = doc["dyr_records_not_used"]
+    for cat, words in (("orphaned", "orphaned .dyr records (no generator of theirs in the .raw)"),
+                       ("bus level", ".dyr records of a bus or plant, not of one machine (not used)")):
+        rows = [r for r in recs if r["category"] == cat]
+        if rows:
+            lines.append(f"  {len(rows):5d} {words}:")
+            lines += [f"          {r['why']}" for r in rows[:2 * most]]
+            if len(rows) > 2 * most:
+                lines.append(f"          (+{len(rows) - 2 * most} more in check.json)")
+    for line in doc["dyr_records_unreadable"]:
+        lines.append(f"        unreadable .dyr record, not used: {line}")
+    return lines
 
 
 def _threads(groups: int) -> int:
@@ -679,7 +766,7 @@ def _summary(entries: list[dict], off: int, programs: int) -> dict:
             continue
         keys = ([f"{lim['record']} {lim['con']} ({lim['signal'].split(' = ')[0]} {lim['side']})"
                  for lim in e.get("limits", [])]
-                or [f"{m or 'case'}: values refused by the model's checks"
+                or [m if m == "no machine record" else f"{m or 'case'}: values refused by the model's checks"
                     for m in e.get("records_at_fault", [])])
         for key in dict.fromkeys(keys):
             problems[key] += 1
@@ -699,9 +786,9 @@ def console_table(doc: dict) -> str:
     first reason, and the counts."""
     s, lines = doc["summary"], []
     lines.append(f"jaxdse check: {Path(doc['case']['raw']).name} + {Path(doc['case']['dyr']).name}: "
-                 f"{s['units']} synchronous unit(s)"
-                 + (f" ({s['out_of_service_not_checked']} more out of service, not checked)"
-                    if s["out_of_service_not_checked"] else ""))
+                 f"{s['accounting']['generator_records']} generator record(s), {s['units']} unit(s) checked")
+    lines += _accounting_lines(doc)
+    lines.append("")
     w = max([len(c) for c in s["model_chains"]] + [11])
     lines.append(f"  {'model chain':<{w}}  units   pass  data problem  not supported  fail")
     for c, n in s["model_chains"].items():
@@ -747,16 +834,14 @@ def check_page(doc: dict) -> str:
         or "<li>none</li>"
     unsupported = "".join(f"<li>{html.escape(k)}: {n} unit(s)</li>"
                           for k, n in s["not_supported_models"].items()) or "<li>none</li>"
-    off = s["out_of_service_not_checked"]
-    off_text = f"; {off} more out of service, not checked" if off else ""
     counts = ", ".join(f"{_badge(o)} {s[o]}" for o in OUTCOMES)
     body = f"""
 <h1>Case check: every synchronous unit at rest and after a voltage step</h1>
 <p class="small">{html.escape(doc['source'])} · jaxdse {html.escape(doc['jaxdse_version'])} ·
 case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revision']}) and
 {html.escape(Path(doc['case']['dyr']).name)} · {doc['wall_time_s']:.0f} s</p>
-<p><b>{s['units']}</b> synchronous units (in-service generators with a machine record{off_text}):
-{counts} · <b>{s['pass_percent']:.1f} %</b> pass.</p>
+<p><b>{s['units']}</b> units checked: {counts} · <b>{s['pass_percent']:.1f} %</b> pass.</p>
+{_accounting_html(doc)}
 <h2>What is checked</h2>
 <p class="small">Each unit's own records (machine, exciter, stabiliser, governor) are built into one
 model, initialised from the power flow at its terminal (the .raw PG, QG on MBASE and the bus
@@ -791,6 +876,45 @@ its model's checks refuse):</p><ul>{reasons}</ul>
 <p class="small">Also: <a href="check.json">check.json</a> (every number).</p>
 """
     return _page("Case check", body, script=True)
+
+
+def _accounting_html(doc: dict) -> str:
+    """Every generator record of the .raw (the counts add up), every one not checked with its
+    reason, and the .dyr records of no generator."""
+    a = doc["summary"]["accounting"]
+    by = ", ".join(f"{n} {html.escape(k)}" for k, n in a["checked_by_category"].items())
+    items = [f"<li><b>{a['checked']}</b> checked ({by}; a machine model jaxdse does not know is "
+             "<i>not supported</i>, exciter, stabiliser or governor records without a machine record "
+             "are a <i>data problem</i>)</li>"]
+    off = doc["summary"]["out_of_service_not_checked"]
+    for k, words in NOT_CHECKED.items():
+        if a[k]:
+            more = f" ({off} with a machine record)" if k == "out of service" and off else ""
+            items.append(f"<li><b>{a[k]}</b> {html.escape(words)}{more}</li>")
+    rows = "".join(
+        f"<tr><td>{r['bus']}</td><td>{html.escape(r['id'])}</td><td>{r['line']}</td>"
+        f"<td>{html.escape(r['category'])}</td><td>{html.escape(' '.join(r['models']) or '–')}</td>"
+        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
+        for r in doc["not_checked"])
+    recs = "".join(
+        f"<tr><td>{html.escape(r['model'])}</td><td>{r['line']}</td><td>{r['bus']}</td>"
+        f"<td>{html.escape(r['id'])}</td><td>{html.escape(r['category'])}</td>"
+        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
+        for r in doc["dyr_records_not_used"])
+    unreadable = "".join(f"<li>{html.escape(x)}</li>" for x in doc["dyr_records_unreadable"])
+    return (f"<p>Every generator record of {html.escape(Path(doc['case']['raw']).name)}: "
+            f"<b>{a['generator_records']}</b>, of which</p><ul>{''.join(items)}</ul>"
+            + (f"<details><summary>The {len(doc['not_checked'])} generator records not checked, and "
+               "why</summary><table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
+               f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
+               "</table></details>" if rows else "")
+            + (f"<p>.dyr records of no generator in the .raw (not used): {len(doc['dyr_records_not_used'])}"
+               f" ({a['dyr_records_orphaned']} orphaned, {a['dyr_records_bus_level']} of a bus or plant)"
+               "</p><table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th>"
+               f"<th>id</th><th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>"
+               if recs else "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
+            + (f"<p>.dyr records the reader could not attribute (not used):</p><ul>{unreadable}</ul>"
+               if unreadable else ""))
 
 
 def write_check(out_dir: Path, doc: dict) -> None:

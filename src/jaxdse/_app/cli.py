@@ -433,6 +433,13 @@ Outcome per unit:
                   (the reasons give the numbers)
 Units of one model structure run in one compiled, vmapped call.
 
+Every generator record of the .raw is accounted for (the counts add up to the .raw's): the
+units checked (an unknown machine model, e.g. a renamed GENSAL, is a unit, not supported,
+named; exciter or governor records without a machine record, a data problem); out of service;
+in service without dynamic records; converter-interfaced (REGCA1, WT4G1, ...); not generators
+(SVC, STATCOM: CSVGN1, CSTATT, SVSMO1, ...); second records of one generator. .dyr records of
+no generator are listed: orphaned (bus or ID not in the .raw: record, line) or of a bus (USRBUS).
+
 CASE.toml: a fleet file's [case] is enough (paths relative to the file); a whole fleet file
 serves as it is (its other sections are not read):
   [case]       raw = "case.raw" (PSS/E rev {RAW_REVISIONS}), dyr = "case.dyr" (or a list of .dyr files,

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from .._core.assess import Assessment
-from .._core.verdict import NOTES
+from .._core.verdict import D_MEANING, NOTES
+from .._dyr.inventory import UNIT_CATEGORIES, inventory
 from .._io.errors import InputError
 from .._io.measurement import condition, order_note
 from .._io.readers import load_table
@@ -110,6 +111,11 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     (out_dir / "fleet.json").write_text(json.dumps(doc, indent=2) + "\n")
     write_fleet_csv(out_dir / "fleet.csv", entries)
     s = doc["summary"]
+    a = doc["accounting"]["summary"]
+    print(f"[jaxdse] {a['generator_records']} generator records in the case: {a['in_fleet']} in the "
+          "fleet's plants, " + ", ".join(f"{a[k]} {k}" for k in FLEET_NOT_IN if a[k])
+          + (f"; {a['dyr_records_orphaned']} orphaned .dyr record(s)" if a["dyr_records_orphaned"] else "")
+          + " (fleet.json accounting)", file=stream)
     print(f"[jaxdse] {len(entries)} plant(s), {len(skipped)} skipped. H: {_counts(s['verdicts'])}; "
           f"median |H error| {_fmt(s['median_abs_H_error_percent'])} %. Model validation: "
           f"{_counts(s['validation'])} ({_counts(s['validation_models'], MODEL_WORDS)}). Wrote "
@@ -157,11 +163,13 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
     traces = _traces(a.estimate, a.replay, dyr)
     m = p.run.plant.machine
     validation = validation_entry(traces, p, criteria, dyr)
+    damping = damping_entry(e, p)
     return {
         "name": p.name, "bus": p.bus, "bus_kv": float(m.v_rated_kv), "s_mva": float(m.s_rated_mva),
         "H_s": h, "H_ci95": [lo, hi], "H_reference_s": href,
         "H_error_percent": None if h is None else 100.0 * (h - href) / href,
-        "D": e["D"], "D_ci95": e["D_ci95"], "verdict": e["verdict"], "reasons": e["reasons"],
+        "D": e["D"], "D_ci95": e["D_ci95"], "D_verdict": damping["verdict"], "damping": damping,
+        "verdict": e["verdict"], "reasons": e["reasons"],
         "interval": {"relative_ci_percent": half,
                      "noise_percent": None if ident is None else _pct(ident.relative_ci_noise),
                      "filter_spread_percent": None if ident is None else _pct(ident.filter_spread),
@@ -172,7 +180,9 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "playback_rms_percent_mbase": _rms_percent(traces, p),
         "playback_model": validation["model"],
         **({} if dyr is None else dyr.entry(_rms_percent(_traces(a.estimate, a.replay), p))),
-        "parameters": e["parameters"],
+        # D's meaning is said once, in "damping"
+        "parameters": {k: ({f: x for f, x in v.items() if f != "meaning"} if k == "D" else v)
+                       for k, v in e["parameters"].items()},
         "units": [dataclasses.asdict(u) for u in p.members],
         "governor_models": sorted({u.governor or "none (constant torque)" for u in p.members}),
         "other_units_on_bus": list(p.others),
@@ -184,6 +194,29 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "location": p.run.measurement.location,
         "identification": ident_info, "online": e["online"], "t_ref_pu": e["t_ref_pu"],
         "n_samples": e["n_samples"], "duration_s": e["duration_s"], "data_quality": quality,
+    }
+
+
+def damping_entry(e: dict, p: FleetPlant) -> dict:
+    """The identified D, what it is and is not (``D_MEANING``), its own verdict (``D_VERDICTS``:
+    ``negative`` where its 95 % interval excludes 0 from below) with its reason in words, the
+    same D per pu speed, and beside it the machine records' D as filed (a different quantity)."""
+    m = p.run.plant.machine
+    w_s = float(m.omega_s)
+    par = e["parameters"].get("D")
+    verdict = par["verdict"] if par is not None else "not identified"
+    why = ([e["reasons"][k] for k in par["reasons"] if k in e["reasons"]] if par is not None else
+           ["the batch identification is off: only the online estimate, without an interval"])
+    ci = e["D_ci95"]
+    return {
+        "meaning": D_MEANING,
+        "verdict": verdict, "reasons": why,
+        "D_pu_torque_per_rad_s": e["D"], "D_ci95_pu_torque_per_rad_s": ci,
+        "D_pu_torque_per_pu_speed": None if e["D"] is None else e["D"] * w_s,
+        "D_ci95_pu_torque_per_pu_speed": None if ci is None else [None if x is None else x * w_s for x in ci],
+        "records_D_pu_torque_per_pu_speed": float(m.d_pu_s) * w_s,
+        "records_D_is": "the MBASE-weighted D constant of the plant's machine records, as filed: "
+                        "the record's value, not comparable with the identified D",
     }
 
 
@@ -292,10 +325,12 @@ def fleet_document(fleet: Fleet, entries: list[dict], skipped: list[dict], wall_
                                               and e["H_error_percent"] is not None
                                               and abs(e["H_error_percent"]) > 10.0],
             "verdicts": dict(Counter(e["verdict"] for e in entries)),
+            "D_verdicts": dict(Counter(e["D_verdict"] for e in entries)),
             "validation": {r: n for r in VALIDATION_RESULTS
                            if (n := sum(e["validation"]["result"] == r for e in entries))},
             "validation_models": dict(Counter(e["validation"]["model"] for e in entries)),
         },
+        "accounting": fleet_accounting(fleet, skipped),
         "units": entries, "skipped": skipped, "notes": list(fleet.notes),
         "criteria": fleet.criteria,
         "observer": module_values(fleet.observer), "settings": settings_values(fleet.settings),
@@ -305,8 +340,68 @@ def fleet_document(fleet: Fleet, entries: list[dict], skipped: list[dict], wall_
     }
 
 
+FLEET_NOT_IN = {
+    "on a plant's bus": "on a plant's bus without a machine record jaxdse knows: its current is in "
+                        "the plant's recorded current, not estimated",
+    "skipped": "in a plant the fleet skipped (see skipped)",
+    "not recorded": "not in the fleet file: no plant of [channels] or [[unit]] found a recording of it",
+    "out of service": "out of service",
+    "no dynamic records": "in service without dynamic records",
+    "converter": "converter-interfaced sources (not synchronous machines)",
+    "not a generator": "not generators: static var compensators or STATCOMs in the generator data",
+    "duplicate": "second generator records for the same bus and ID (the first is used)",
+}
+"""What became of the case's generator records that are not units of a plant, in words."""
+
+
+def fleet_accounting(fleet: Fleet, skipped: list[dict]) -> dict:
+    """Every generator record of the case: ``in_fleet`` (a unit of a plant estimated) and each
+    category not in the fleet (:data:`FLEET_NOT_IN`), adding up to
+    ``generator_records``; every one not in the fleet listed with its reason, and the .dyr
+    records of no generator."""
+    inv = inventory(fleet.raw, fleet.dyr)
+    member = {(p.bus, m.id.strip().upper()): p.name for p in fleet.plants for m in p.members}
+    beside = {(p.bus, o.strip().upper()): p.name for p in fleet.plants for o in p.others}
+    skipped_at = {}
+    for k in skipped:   # a plant's IDs where it names them, else every unit on its bus
+        for i in k.get("ids") or [None]:
+            skipped_at.setdefault((k["bus"], None if i is None else i.strip().upper()), k)
+    rows, in_fleet = [], 0
+    for a in inv.generators:
+        g = a.generator
+        key = (g.bus, g.id.strip().upper())
+        row = a.as_dict()
+        if a.category in UNIT_CATEGORIES:
+            if key in member:
+                in_fleet += 1
+                continue
+            if key in beside:
+                row.update(category="on a plant's bus", plant=beside[key],
+                           why=f"{a.why}; on the bus of plant {beside[key]} without a machine record "
+                               "jaxdse knows: its current is in the plant's recorded current")
+            elif (k := skipped_at.get(key, skipped_at.get((g.bus, None)))) is not None:
+                row.update(category="skipped", plant=k["name"],
+                           why=f"plant {k['name']} skipped: {k['reason']}")
+            else:
+                row.update(category="not recorded",
+                           why=f"{a.why}; no plant of the fleet file found a recording of it")
+        rows.append(row)
+    counts = Counter(r["category"] for r in rows)
+    out = {"generator_records": len(inv.generators),
+           "in_fleet": in_fleet,
+           **{k: counts.get(k, 0) for k in FLEET_NOT_IN}}
+    if out["in_fleet"] + sum(out[k] for k in FLEET_NOT_IN) != out["generator_records"]:  # a bug, not data
+        raise AssertionError(f"generator records not accounted for: {out}")
+    s = inv.summary()
+    out.update({k: s[k] for k in ("dyr_records_orphaned", "dyr_records_bus_level", "dyr_records_unreadable")})
+    return {"summary": out, "categories": dict(FLEET_NOT_IN), "generators_not_in_fleet": rows,
+            "dyr_records_not_used": [r.as_dict() for r in inv.records],
+            "dyr_records_unreadable": list(inv.unreadable)}
+
+
 CSV_FIELDS = ("name", "bus", "s_mva", "governor_models", "H_s", "H_ci95_low", "H_ci95_high",
-              "H_reference_s", "H_error_percent", "D", "verdict", "reasons", "smape_I_t", "smape_P_t",
+              "H_reference_s", "H_error_percent", "D", "D_verdict", "verdict", "reasons", "smape_I_t",
+              "smape_P_t",
               "rms_P_percent_mbase", "rms_Q_percent_mbase", "validation", "validation_model")
 
 
@@ -319,7 +414,7 @@ def write_fleet_csv(path: Path, entries: list[dict]) -> None:
             w.writerow([e["name"], e["bus"], f"{e['s_mva']:.6g}", "/".join(e["governor_models"]),
                         _fmt(e["H_s"], ".6g"), _fmt(e["H_ci95"][0], ".6g"), _fmt(e["H_ci95"][1], ".6g"),
                         _fmt(e["H_reference_s"], ".6g"), _fmt(e["H_error_percent"], ".4g"),
-                        _fmt(e["D"], ".6g"), e["verdict"], ";".join(e["reasons"]),
+                        _fmt(e["D"], ".6g"), e["D_verdict"], e["verdict"], ";".join(e["reasons"]),
                         _fmt(s["I_t"], ".4g"), _fmt(s["P_t"], ".4g"), _fmt(rms["P_t"], ".4g"),
                         _fmt(rms["Q_t"], ".4g"), e["validation"]["result"], e["validation"]["model"]])
 

@@ -160,7 +160,7 @@ def load_fleet(path) -> Fleet:
             except InputError as e:
                 why = str(e)
         if why is not None:
-            skipped.append(_skip(name, bus, why))
+            skipped.append(_skip(name, bus, why, ids))
             continue
         candidates.append((name, bus, units, spec))
     slots = governor_slots([governor_sets(c[2].units) for c in candidates])
@@ -169,7 +169,7 @@ def load_fleet(path) -> Fleet:
         try:
             run, notes = generator_run(name, bus, units.units, spec, raw, slots)
         except (InputError, ValueError, ArithmeticError) as e:   # a check missed: still one plant
-            skipped.append(_skip(name, bus, f"plant data: {e}"))
+            skipped.append(_skip(name, bus, f"plant data: {e}", [m.id for m in units.members]))
             continue
         built.append(FleetPlant(name, bus, tuple(units.members), tuple(units.others), run,
                                 fallbacks=tuple(_one_line(n) for n in (*units.notes, *notes)),
@@ -232,9 +232,11 @@ def _one_line(text) -> str:
     return " ".join(str(text).split())
 
 
-def _skip(name, bus, reason) -> dict:
-    """A ``skipped`` entry: {"name", "bus", "reason"}, the reason on one line."""
-    return {"name": name, "bus": bus, "reason": _one_line(reason) or "unknown"}
+def _skip(name, bus, reason, ids=None) -> dict:
+    """A ``skipped`` entry: {"name", "bus", "reason"}, the reason on one line; ``ids``: the
+    machine IDs of the plant where it names them (absent: every unit on the bus)."""
+    out = {"name": name, "bus": bus, "reason": _one_line(reason) or "unknown"}
+    return out if ids is None else {**out, "ids": [str(i).strip() for i in ids]}
 
 
 def _explicit_units(path, units, raw: RawCase, columns: list[str]):
@@ -346,7 +348,7 @@ def _pattern_units(path, ch: dict, raw: RawCase, dyr: DyrData, columns: list[str
             try:
                 cols = {r: _one(path, columns, ch[r], bound, r) for r in ROLES[1:] if r in ch}
             except InputError as e:
-                skipped.append(_skip(name, bus, str(e)))
+                skipped.append(_skip(name, bus, str(e), [gid]))
                 continue
             missing = [r for r in required if cols[r] is None]
             if len(missing) == len(required):
@@ -354,7 +356,7 @@ def _pattern_units(path, ch: dict, raw: RawCase, dyr: DyrData, columns: list[str
             if missing:
                 skipped.append(_skip(name, bus, f"{path}: no column matches "
                                      + ", ".join(f"{r} = {ch[r]!r}" for r in missing)
-                                     + f" for bus {bus} id {gid!r}"))
+                                     + f" for bus {bus} id {gid!r}", [gid]))
                 continue
             if cols.get("frequency", "") is None:
                 del cols["frequency"]                          # optional: from the angle

@@ -19,6 +19,9 @@ COLOURS = {"identified": "#1a9850", "weakly identified": "#fdae61", "not identif
            "failed": "#7f7f7f"}
 """H's verdict -> colour (figures and table)."""
 VALIDATION_COLOURS = {"pass": "#1a9850", "fail": "#d73027", "not judged": "#7f7f7f"}
+D_COLOURS = {"identified": "#1a9850", "negative": "#8e44ad", "not identified": "#d73027",
+             "failed": "#7f7f7f"}
+"""D's verdict -> colour."""
 """The model validation's result -> colour."""
 MODEL_NAMES = {"dyr": "own .dyr records", "surrogate": "surrogate (P only)"}
 
@@ -299,6 +302,7 @@ def fleet_page(doc: dict, figures: bool) -> str:
             f"<td data-sort=\"{_f(abs(err) if err is not None else None, '.3f')}\">"
             f"{_f(err, '+.1f')}</td>"
             f"<td data-sort=\"{VERDICTS.index(e['verdict'])}\">{_badge(e['verdict'])}</td>"
+            f"<td>{_dbadge(e['D_verdict']) if e.get('D_verdict') else '–'}</td>"
             f"<td data-sort=\"{order[val['result']]}\">{_vbadge(e)}</td></tr>")
     todo = _attention(units)
     attention = "".join(
@@ -325,6 +329,7 @@ case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revisio
 Median |H − H<sub>.dyr</sub>|: <b>{_f(median, '.1f')} %</b>; {s['within_10_percent']} of {s['units']} within 10 %.
 Identified although more than 10 % off the model: {len(s['identified_outside_10_percent'])}{
 html.escape(' (' + ', '.join(s['identified_outside_10_percent']) + ')') if s['identified_outside_10_percent'] else ''}.</li>
+{_damping_line(s)}
 <li><b>Model validation</b> (NERC MOD-026-2: the played-back model against the recorded response):
 {results}; played back with {html.escape(models)}.</li>
 </ul>
@@ -355,19 +360,67 @@ after the event window. A recording without a disturbance is not judged. A whole
 average (sMAPE) is reported, never judged.</p>
 <table class="sortable"><thead><tr><th>unit</th><th>bus</th><th>MVA</th><th>machine model</th>
 <th>governor(s)</th><th>H [s]</th><th>95 % interval [s]</th><th>.dyr H [s]</th><th>difference [%]</th>
-<th>H's verdict</th><th>model validation</th></tr></thead><tbody>
+<th>H's verdict</th><th>D's verdict</th><th>model validation</th></tr></thead><tbody>
 {''.join(rows)}
 </tbody></table>
 {f'<h2>Skipped</h2><ul>{skipped}</ul>' if skipped else ''}
+{accounting_section(doc)}
 <p class="small">Also: <a href="fleet.json">fleet.json</a> (every number), <a href="fleet.csv">fleet.csv</a>,
 <a href="report.md">report.md</a>.</p>
 """
     return _page("Fleet: inertia and model validation", body, script=True)
 
 
+def accounting_section(doc: dict) -> str:
+    """Every generator record of the case: the counts (they add up to the .raw's), each one not
+    in the fleet with its reason, and the .dyr records of no generator."""
+    acc = doc.get("accounting")
+    if acc is None:
+        return ""
+    a = acc["summary"]
+    items = [f"<li><b>{a['in_fleet']}</b> units of the plants estimated above</li>"]
+    items += [f"<li><b>{a[k]}</b> {html.escape(w)}</li>" for k, w in acc["categories"].items() if a[k]]
+    rows = "".join(
+        f"<tr><td>{r['bus']}</td><td>{html.escape(r['id'])}</td><td>{r['line']}</td>"
+        f"<td>{html.escape(r['category'])}</td><td>{html.escape(' '.join(r['models']) or '–')}</td>"
+        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
+        for r in acc["generators_not_in_fleet"])
+    recs = "".join(
+        f"<tr><td>{html.escape(r['model'])}</td><td>{r['line']}</td><td>{r['bus']}</td>"
+        f"<td>{html.escape(r['id'])}</td><td>{html.escape(r['category'])}</td>"
+        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
+        for r in acc["dyr_records_not_used"])
+    unreadable = "".join(f"<li>{html.escape(x)}</li>" for x in acc["dyr_records_unreadable"])
+    return (f"<h2>Every generator record of the case</h2><p>{html.escape(Path(doc['case']['raw']).name)} "
+            f"has <b>{a['generator_records']}</b> generator records:</p><ul>{''.join(items)}</ul>"
+            + (f"<details><summary>The {len(acc['generators_not_in_fleet'])} not in the fleet, and why"
+               "</summary><table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
+               f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
+               "</table></details>" if rows else "")
+            + (f"<p>.dyr records of no generator in the .raw (not used): "
+               f"{len(acc['dyr_records_not_used'])}</p>"
+               "<table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th><th>id</th>"
+               f"<th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>" if recs else
+               "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
+            + (f"<p>.dyr records the reader could not attribute:</p><ul>{unreadable}</ul>"
+               if unreadable else ""))
+
+
+def _damping_line(s: dict) -> str:
+    if not s.get("D_verdicts"):
+        return ""
+    return ("<li><b>Damping D</b> of the swing equation (all the damping the recording shows, lumped; "
+            "not the machine records' D): "
+            + ", ".join(f"{_dbadge(v)} {n}" for v, n in s["D_verdicts"].items())
+            + ".</li>")
+
+
 def unit_page(e: dict, doc: dict, figures: bool) -> str:
     name = html.escape(e["name"])
-    decisive, notes = _decisive(e), [v for k, v in e["reasons"].items() if k in NOTES]
+    # D's findings are said in D's own section (damping_section)
+    decisive = _decisive(e)
+    notes = [v for k, v in e["reasons"].items()
+             if k in NOTES and k not in ("negative_damping", "d_interval_wide")]
     fallbacks = ("<p><b>Plant data fallbacks</b> (the .dyr records as read, and what jaxdse did):</p><ul>"
                  + "".join(f"<li>{html.escape(f)}</li>" for f in e.get("fallbacks", [])) + "</ul>"
                  if e.get("fallbacks") else "")
@@ -386,9 +439,6 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
     numbers = [("H [s]", _f(e["H_s"], ".3f")), ("95 % interval of H [s]", _ci(e)),
                ("H of the .dyr (MBASE-weighted) [s]", _f(e["H_reference_s"], ".3f")),
                ("difference [%]", _f(e["H_error_percent"], "+.1f")),
-               ("D [pu torque / (rad/s)]", _f(e["D"], ".4g")),
-               ("95 % interval of D", " – ".join(_f(x, ".4g") for x in (e["D_ci95"] or [None, None]))),
-               ("D as in the GENROU record, D·ω<sub>s</sub> [pu torque / pu speed]", _f(_genrou_d(e, e["D"]), ".4g")),
                ("interval half width [%]", _f(it["relative_ci_percent"], ".1f")),
                ("  of which measurement noise [%]", _f(it["noise_percent"], ".1f")),
                ("  model error: filter spread, enters as 1.96x [%]", _f(it["filter_spread_percent"], ".1f")),
@@ -456,6 +506,7 @@ to it. Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.3
 <th>RMS error</th><th>aligned RMS error (shift)</th><th>mode measured</th><th>mode replay</th></tr>
 {win_rows}</table>
 <h2>Numbers of the H estimate</h2><table>{num_rows}</table>
+{damping_section(e)}
 <h2>Plant (from the PSS/E case)</h2>
 {fallbacks}
 <table><tr><th>unit ID</th><th>model</th><th>MBASE [MVA]</th><th>H [s]</th><th>governor</th></tr>
@@ -468,11 +519,45 @@ to it. Whole-record RMS error: P {_f(e['playback_rms_percent_mbase']['P_t'], '.3
     return _page(f"{e['name']}: H {e['verdict']}, model validation {val['result']}", body)
 
 
-def _genrou_d(e: dict, d):
-    """D [pu torque per rad/s] in the GENROU record's convention, D·w_s [pu torque per pu speed]."""
+def _dbadge(verdict: str) -> str:
+    return f'<span class="v" style="background:{D_COLOURS[verdict]}">{html.escape(verdict)}</span>'
+
+
+D_WORDS = {
+    "identified": "The recording determines the swing equation's D: its 95 % interval is narrower "
+                  "than D itself.",
+    "negative": "D < 0 with 95 % confidence: the swing equation needs negative damping to follow "
+                "the recording. A finding about the unit's response (its excitation and stabiliser "
+                "take away more damping than the damper windings add, as the swing equation sees "
+                "them), worth a look at their tuning; not a negative D in the machine record.",
+    "not identified": "The recording does not determine D: its 95 % interval is wider than D itself.",
+    "failed": "The estimate failed: no D.",
+}
+"""D's verdict in words, on the unit page."""
+
+
+def damping_section(e: dict) -> str:
+    """The unit page's section on D: its own verdict, what it is and is not (stated once), the
+    identified value per rad/s and per pu speed, and the machine records' D beside it."""
+    d = e.get("damping")
     if d is None:
-        return None
-    return d * 2.0 * math.pi * float(e["machine"]["f_nominal_hz"])
+        return ""
+    ci = d["D_ci95_pu_torque_per_rad_s"] or [None, None]
+    ci_pu = d["D_ci95_pu_torque_per_pu_speed"] or [None, None]
+    # the verdict in words; its numbers are in the table (fleet.json "damping" has the reasons)
+    return f"""<h2>Damping D of the swing equation: {_dbadge(d['verdict'])}</h2>
+<p>{html.escape(D_WORDS[d['verdict']])}</p>
+<p><b>What this D is:</b> {html.escape(d['meaning'])}</p>
+<table><tr><th></th><th>value</th><th>95 % interval (measurement noise only)</th></tr>
+<tr><td>identified D [pu torque / (rad/s)]</td><td>{_f(d['D_pu_torque_per_rad_s'], '.4g')}</td>
+<td>{' – '.join(_f(x, '.4g') for x in ci)}</td></tr>
+<tr><td>identified D·ω<sub>s</sub> [pu torque / pu speed]</td>
+<td>{_f(d['D_pu_torque_per_pu_speed'], '.4g')}</td>
+<td>{' – '.join(_f(x, '.4g') for x in ci_pu)}</td></tr>
+<tr><td>for comparison only: D of the machine record(s) as filed (MBASE-weighted) [pu torque / pu speed]</td>
+<td>{_f(d['records_D_pu_torque_per_pu_speed'], '.4g')}</td>
+<td>– (the record's value, not an estimate)</td></tr>
+</table>"""
 
 
 def fleet_markdown(doc: dict) -> str:

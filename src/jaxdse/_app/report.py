@@ -13,7 +13,16 @@ from .._core.assess import Assessment
 from .._core.estimate import Replay
 from .._core.identify import Identified, condition_number
 from .._core.result import Estimate
-from .._core.verdict import FINDINGS, NOTES, REASONS, VERDICTS, describe, online_verdict
+from .._core.verdict import (
+    D_MEANING,
+    D_VERDICTS,
+    FINDINGS,
+    NOTES,
+    REASONS,
+    VERDICTS,
+    describe,
+    online_verdict,
+)
 
 
 def _playback(est: Estimate, rep: Replay | None):
@@ -94,8 +103,9 @@ def summary_entry(name: str, assessment: Assessment | Estimate, a2_reference=Non
         "a1": _num(final.a1), "a2": _num(final.a2), "H_s": _num(final.h_s), "D": _num(final.d_pu_s),
         "H_ci95": _pair(ident.h_ci95) if ident is not None else None,
         "D_ci95": _pair(ident.d_ci95) if ident is not None else None,
-        # D in the GENROU record's convention [pu torque per pu speed]: D w_s = 2 H a1
-        "D_genrou": _num(2.0 * final.h_s * final.a1),
+        # the same identified D per pu speed [pu torque per pu speed]: D w_s = 2 H a1 (the unit of
+        # a machine record's D, not its meaning: D_MEANING)
+        "D_pu_speed": _num(2.0 * final.h_s * final.a1),
         "a2_reference": _num(a2_reference) if a2_reference is not None else None,
         "H_reference_s": _num(h_reference_s) if h_reference_s is not None else None,
         "a2_error_percent": (_num(100 * (final.a2 - a2_reference) / abs(a2_reference))
@@ -141,8 +151,12 @@ def _reason_text(key: str, ident, online: dict) -> str:
                 f"droop allows (governor correction {100 * (k - 1):+.0f} %): if the governor data are "
                 f"right, the power and H are {k:.2f}x too large: {cause}")
     if key == "negative_damping" and ident is not None:
-        return (f"D = {float(ident.d_pu_s):.3g} < 0 with 95 % confidence: the 3rd-order model lumps the "
-                "excitation and stabiliser damping into D")
+        lo, hi = (float(x) for x in ident.d_ci95)
+        return (f"D = {float(ident.d_pu_s):.3g} pu torque per rad/s ({2.0 * float(ident.h_s * ident.a1):.3g} "
+                f"per pu speed) < 0 with 95 % confidence (interval {lo:.4g} to {hi:.4g}): the swing "
+                "equation needs negative damping to follow the recording; its D lumps the excitation "
+                "and stabiliser damping (an exciter's negative damping outweighing the damper "
+                "windings'), not the machine record's D")
     if key in ("h_rests_on_damping", "h_rests_on_governor") and ident is not None:
         alt = (ident.h_without_damping_s if key == "h_rests_on_damping"
                else ident.h_without_governor_correction_s)
@@ -161,8 +175,9 @@ def parameter_verdicts(verdict, keys: list[str], ident) -> dict:
     h_keys = [k for k in keys if k not in NOTES]
     out = {"H": {"verdict": word(verdict.code), "reasons": h_keys}}
     if ident is not None:
-        out["D"] = {"verdict": word(verdict.d_code),
-                    "reasons": [k for k in keys if k in ("negative_damping", "d_interval_wide")]}
+        out["D"] = {"verdict": D_VERDICTS[int(verdict.d_code)],
+                    "reasons": [k for k in keys if k in ("negative_damping", "d_interval_wide")],
+                    "meaning": D_MEANING}
         out["governor_correction"] = {"verdict": word(verdict.governor_code),
                                       "value_percent": _num(100 * ident.governor_gain_error),
                                       "reasons": [k for k in keys if k == "governor_model_off"]}

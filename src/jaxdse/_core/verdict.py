@@ -31,6 +31,18 @@ from .result import Estimate
 
 VERDICTS = ("identified", "weakly identified", "not identified", "failed")
 """Verdict codes 0..3, from best to worst."""
+D_VERDICTS = ("identified", "negative", "not identified", "failed")
+"""D's verdict codes 0..3 (``Verdict.d_code``): ``negative`` is D < 0 with 95 % confidence
+(its interval excludes 0 from below), a finding about the unit's response (see
+:data:`D_MEANING`), not a weaker estimate."""
+D_MEANING = (
+    "D is the damping of the swing equation fitted to the recording (2H d(dw)/dt = Tm - Te - D dw, "
+    "on the plant's MBASE): it lumps all the damping the recorded response shows beyond the "
+    "modelled torques, that of the damper windings, the exciter and stabiliser, and the governor "
+    "beyond its model. It is not the D constant of the machine records (PSS/E's D of GENROU, "
+    "GENSAL, ..., the speed-deviation damping alone, often 0) and is no estimate of it; its 95 % "
+    "interval covers the measurement noise only, not how D changes with the model.")
+"""What the identified D is and is not, stated once for every report."""
 
 REASONS = {
     # the unit failed: no parameter
@@ -110,7 +122,7 @@ class Verdict(eqx.Module):
     """H's verdict: the unit's headline (H is what a fleet report files)."""
     reasons: Array
     d_code: Array
-    """D's verdict."""
+    """D's verdict (an index into ``D_VERDICTS``)."""
     governor_code: Array
     """The governor correction's verdict: ``identified`` when the .dyr governor needs no more
     than ``max_governor_gain_error`` of a correction; ``weakly identified`` beyond."""
