@@ -85,7 +85,7 @@ from .._io.psse import (
     read_raw,
     record_label,
 )
-from .._many.waits import Expired, Task, bounded
+from .._many.waits import Expired, Task, bounded, executing
 from .._io.schema import build, no_unknown, options, read_toml, subtable
 from .._models.exciters import EXCITERS
 from .._models.governors import GOVERNORS
@@ -390,10 +390,15 @@ def _batch_fn():
 _BATCH: list = []
 
 
-def _batch(units, lanes, run):
+def _batch_jit():
+    """The jitted vmapped :func:`_one` (made once)."""
     if not _BATCH:
         _BATCH.append(_batch_fn())
-    return _BATCH[0](units, lanes, run)
+    return _BATCH[0]
+
+
+def _batch(units, lanes, run):
+    return _batch_jit()(units, lanes, run)
 
 
 def _stack(trees):
@@ -620,15 +625,17 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         t0 = time.perf_counter()
         units = [statics[k].model.unit for k in members]
         lanes = [_lane(raw, gens[k], x) for x in (0.0, spec.step) for k in members]
-        res = jax.device_get(_batch(_stack(units + units), _stack(lanes), how))
-        return res, time.perf_counter() - t0
+        args = (_stack(units + units), _stack(lanes), how)
+        compiled = _batch_jit().lower(*args).compile()
+        executing()   # the group's run limit counts from here
+        return jax.device_get(compiled(*args)), time.perf_counter() - t0
 
     def execute(batches: list[tuple[list[int], _Run]]) -> None:
         # one compiled call per model structure and solver, side by side on the cores; every
         # wait bounded (a limit from the group's work), an expired group's units marked
         tasks = [Task(f"group {_chain(entries[m[0]])} ({len(m)} unit(s), {how.solver})",
                       wait_limit_s(len(m), spec, how.solver, how.substeps),
-                      lambda m=m, how=how: one_group(m, how)) for m, how in batches]
+                      lambda m=m, how=how: one_group(m, how), COMPILE_LIMIT_S) for m, how in batches]
         for i, value in bounded(tasks, n_workers, threads=in_threads):
             members, how = batches[i]
             if isinstance(value, Expired):
@@ -688,13 +695,16 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
     return doc
 
 
-WAIT_BASE_S = 300.0
-"""The wait on one group's compiled call: this much [s] (its compile, on a loaded machine) ..."""
+COMPILE_LIMIT_S = 1800.0
+"""The wait on one group's compile [s]: Kvaerno5's took 41 s of CPU and 143 s of wall time on 2
+cores loaded 7-fold (a unit of GENROU ESST3A TGOV1), Tsit5's 6 s and 22 s."""
+WAIT_BASE_S = 60.0
+"""The wait on one group's compiled run: this much [s] ..."""
 WAIT_PER_LANE_STEP_S = 2e-4
 """... plus this much per integration step of each of its runs [s] (2 runs per unit; Kvaerno5
-counted at 8 steps per frame). Measured on ACTIVSg2000 with both cores loaded 7-fold: 205 units
-of GENROU ESST4B IEEEST GGOV1 took 64 s (3 us per lane-step, compile included), so the limit
-(506 s) is ~8 times what a slow machine needs."""
+counted at 8 steps per frame). On ACTIVSg2000 with both cores loaded 7-fold, 205 units of
+GENROU ESST4B IEEEST GGOV1 took 64 s, compile included (3 us per lane-step): the limit (266 s)
+is 4 times that."""
 
 
 def wait_limit_s(units: int, spec: CheckSpec, solver: str, substeps: int) -> float:

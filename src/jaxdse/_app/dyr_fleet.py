@@ -188,8 +188,10 @@ def _starts(units, series, settings):
     return (eqx.filter_vmap(_start, in_axes=(0, 0, None))(units, series, settings),)
 
 
-WAIT_BASE_S = 300.0
-"""The wait on one call of the playback: this much [s] (its compile on a loaded machine) ..."""
+COMPILE_LIMIT_S = 1800.0
+"""The wait on one call's compile [s] (minutes on a loaded machine: ``jaxdse._app.check``)."""
+WAIT_BASE_S = 60.0
+"""The wait on one call of the playback, once compiled: this much [s] ..."""
 WAIT_PER_UNIT_FRAME_S = 2e-3
 """... plus this much per unit and frame [s]: generous (an adaptive playback takes a few steps
 per frame; a stuck call is found out, not a slow one cut short)."""
@@ -285,8 +287,8 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
         tasks = [Task(label(items, settings) + ": its initial state",
                       wait_limit_s(len(items), int(items[0][3].t_s.shape[0])),
                       lambda items=items: programs.call("_starts", _starts, _stack([it[2] for it in items]),
-                                                        _stack([it[3] for it in items]), settings)[0])
-                 for items in order]
+                                                        _stack([it[3] for it in items]), settings)[0],
+                      COMPILE_LIMIT_S) for items in order]
         for i, jac in bounded(tasks, threads(len(order)), threads=in_threads):
             if isinstance(jac, Expired):
                 continue   # the playback itself is bounded and marked below
@@ -307,8 +309,8 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
         return _Played(*jax.device_get(programs.call("_batch", _batch, units, series, how)))
 
     tasks = [Task(label(items, implicit if (items[0][0], items[0][1]) in stiff else settings),
-                  wait_limit_s(len(items), int(items[0][3].t_s.shape[0])), lambda items=items: run(items))
-             for items in order]
+                  wait_limit_s(len(items), int(items[0][3].t_s.shape[0])), lambda items=items: run(items),
+                  COMPILE_LIMIT_S) for items in order]
     results: dict = {}
     left = {name: len(pm.units) for name, (pm, _) in jobs.items()}
     for i, res in bounded(tasks, threads(len(order)), threads=in_threads):
