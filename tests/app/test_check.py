@@ -182,3 +182,20 @@ def test_exciter_and_governor_limits_at_the_initial_state():
     assert (c.con, c.value, c.bound, c.side) == ("PMAX", pytest.approx(1.2), 1.0, "above")
     assert "K1 + K3 + K5 + K7 = 0.5" in describe(c)
     assert exciter_crossings("NOTAMODEL", model, state, start) == []
+
+
+def test_a_group_past_its_limit_is_marked_and_the_check_goes_on(tmp_path, monkeypatch):
+    """A run limit of 0 s: the group's compiled run cannot return in time; its units are `fail`
+    with what was waited for, the others keep their outcomes, and the check ends."""
+    import jaxdse._app.check as check
+
+    monkeypatch.setattr(check, "WAIT_BASE_S", 0.0)
+    monkeypatch.setattr(check, "WAIT_PER_LANE_STEP_S", 0.0)
+    case = load_case(_case(tmp_path, _bad, '[playback]\nke_zero = "literal"\n'))
+    doc = check.check_case(case, progress=False)
+    units = {e["name"]: e for e in doc["units"]}
+    assert [units[n]["outcome"] for n in ("2_1", "3_1")] == ["not supported", "data problem"]
+    for n in ("1_1", "6_1", "8_1"):
+        assert units[n]["outcome"] == "fail"
+        assert units[n]["reasons"][0].startswith("timed out after 0 s waiting for group GENROU ESST3A - "
+                                                 "TGOV1 (3 unit(s), tsit5)"), units[n]["reasons"]

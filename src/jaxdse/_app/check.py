@@ -85,8 +85,8 @@ from .._io.psse import (
     read_raw,
     record_label,
 )
-from .._many.waits import Expired, Task, bounded, executing
 from .._io.schema import build, no_unknown, options, read_toml, subtable
+from .._many.waits import Expired, Task, bounded, executing
 from .._models.exciters import EXCITERS
 from .._models.governors import GOVERNORS
 from .._models.machines import MACHINES
