@@ -2,14 +2,16 @@
 
 A case of five units from the ANDES bench (ieee14) with three records made bad: an exciter with
 an inverted limit (VIMAX below VIMIN), a governor whose VMAX lies below the unit's initial
-valve position, and an exciter model jaxdse does not simulate (EXST2). Eight more generator
-records, one of each kind the check accounts for: a machine record of a model jaxdse does not
-know (GENSAL renamed GENSAX), a governor record without a machine record, an out-of-service
-unit, a generator without dynamic records, a static var compensator (CSVGN1), a converter
-(REGCA1/REECA1), a second record of one generator; and .dyr records of no generator (a bus
-not in the .raw, an ID not on its bus, a USRBUS). Its check.json fields, the exit status, the
-console table; the case loader; the limits found at the initial state. The three units that
-are simulated share one model structure: one compile.
+valve position, and an exciter model jaxdse does not simulate (EXST2); and one made stiff (bus 8:
+GENROU X''d = 0.005 pu, Xl = 0.1 pu, a fastest mode near -3200 1/s that the fixed Tsit5 step
+cannot follow: run again with Kvaerno5, and passes). Eight more generator records, one of each
+kind the check accounts for: a machine record of a model jaxdse does not know (GENSAL renamed
+GENSAX), a governor record without a machine record, an out-of-service unit, a generator without
+dynamic records, a static var compensator (CSVGN1), a converter (REGCA1/REECA1), a second record
+of one generator; and .dyr records of no generator (a bus not in the .raw, an ID not on its bus,
+a USRBUS). Its check.json fields, the exit status, the console table; the case loader; the
+limits found at the initial state. The three units that are simulated share one model
+structure: one compile, and one more for Kvaerno5.
 """
 
 import json
@@ -46,6 +48,16 @@ def _bad(text: str) -> str:
     lines[k] = "3 'ESST3A' 1 0.02 -0.2 0.2 8 1 5"
     k = lines.index("6 'TGOV1' 1 0.05 0.05 1.05 0.3 1 2.1")
     lines[k] = "6 'TGOV1' 1 0.05 0.05 0.25 0.0 1 2.1"
+    return _stiff("\n".join(lines) + "\n")
+
+
+def _stiff(text: str, bus: int = 8) -> str:
+    """Bus ``bus``'s GENROU with X''d = X''q = 0.005 pu and Xl = 0.1 pu (its fastest mode near
+    -3200 1/s at rest; the fixed explicit step 1/120 s follows modes down to -400 1/s)."""
+    lines = text.splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith(f"{bus} 'GENROU'"))
+    cons = lines[k + 1].split()
+    lines[k + 1] = "    " + " ".join(cons[:4] + ["0.005", "0.1"])
     return "\n".join(lines) + "\n"
 
 
@@ -98,6 +110,12 @@ def test_outcomes_reasons_and_json(checked):
     assert units["1_1"]["models"] == {"machine": "GENROU", "exciter": "ESST3A", "stabiliser": None,
                                       "governor": "TGOV1"}
     assert [units[n]["outcome"] for n in ("1_1", "8_1")] == ["pass", "pass"]
+    # the stiff record: found from its modes, integrated with Kvaerno5, said so; no setting changed
+    assert units["8_1"]["solver"] == "kvaerno5" and "solver" not in units["1_1"]
+    stiff = [n for n in units["8_1"]["notes"] if n.startswith("stiff: fastest mode -")]
+    assert len(stiff) == 1 and "Kvaerno5" in stiff[0], units["8_1"]["notes"]
+    assert -4000 < float(stiff[0].split()[3]) < -1000
+    assert not any(n.startswith("stiff") for n in units["1_1"]["notes"])
     assert units["1_1"]["reasons"] == [] and units["1_1"]["numbers"]["max_dxdt_t0"] < 1e-6
     assert abs(units["1_1"]["numbers"]["p_error_held_pu"]) < 1e-5
     # the unsupported model, named
@@ -120,7 +138,7 @@ def test_outcomes_reasons_and_json(checked):
     assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (7, 2, 3, 2, 0)
     assert s["not_supported_models"] == {"EXST2": 1, "GENSAX": 1}
     assert s["data_problems"]["TGOV1 VMAX (valve0 above)"] == 1
-    assert s["compiled_programs"] == 1  # the simulated units share one structure
+    assert s["compiled_programs"] == 2  # the simulated units share one structure; + Kvaerno5
     page = (out / "check.html").read_text()
     assert "sortable" in page and "EXST2" in page and "data problem" in page
 
@@ -256,3 +274,20 @@ def test_exciter_and_governor_limits_at_the_initial_state():
     assert (c.con, c.value, c.bound, c.side) == ("PMAX", pytest.approx(1.2), 1.0, "above")
     assert "K1 + K3 + K5 + K7 = 0.5" in describe(c)
     assert exciter_crossings("NOTAMODEL", model, state, start) == []
+
+
+def test_a_group_past_its_limit_is_marked_and_the_check_goes_on(tmp_path, monkeypatch):
+    """A run limit of 0 s: the group's compiled run cannot return in time; its units are `fail`
+    with what was waited for, the others keep their outcomes, and the check ends."""
+    import jaxdse._app.check as check
+
+    monkeypatch.setattr(check, "WAIT_BASE_S", 0.0)
+    monkeypatch.setattr(check, "WAIT_PER_LANE_STEP_S", 0.0)
+    case = load_case(_case(tmp_path, _bad, '[playback]\nke_zero = "literal"\n'))
+    doc = check.check_case(case, progress=False)
+    units = {e["name"]: e for e in doc["units"]}
+    assert [units[n]["outcome"] for n in ("2_1", "3_1")] == ["not supported", "data problem"]
+    for n in ("1_1", "6_1", "8_1"):
+        assert units[n]["outcome"] == "fail"
+        assert units[n]["reasons"][0].startswith("timed out after 0 s waiting for group GENROU ESST3A - "
+                                                 "TGOV1 (3 unit(s), tsit5)"), units[n]["reasons"]

@@ -41,13 +41,22 @@ def _case(tmp: Path, dyr_text: str, events=("line_trip",), tags=("B1_G1", "B2_G1
     return tmp / "fleet.toml"
 
 
+def _stiff(text: str, bus: int) -> str:
+    """Bus ``bus``'s GENROU with X''d = X''q = 0.005 pu and Xl = 0.1 pu."""
+    lines = text.splitlines()
+    k = next(i for i, line in enumerate(lines) if line.startswith(f"{bus} 'GENROU'"))
+    lines[k + 1] = "    " + " ".join(lines[k + 1].split()[:4] + ["0.005", "0.1"])
+    return "\n".join(lines) + "\n"
+
+
 @pytest.fixture(scope="module")
 def fleet_run(tmp_path_factory):
     """One fleet run: B1_G1 with its own records, B2_G1 with its exciter renamed to a model
-    jaxdse does not simulate (EXELI, same constants)."""
+    jaxdse does not simulate (EXELI, same constants), B3_G1 with a stiff GENROU (X''d = 0.005 pu,
+    Xl = 0.1 pu: a fastest mode near -3000 1/s)."""
     tmp = tmp_path_factory.mktemp("dyr_fleet")
-    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'")
-    path = _case(tmp, text)
+    text = _stiff((DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'"), bus=3)
+    path = _case(tmp, text, tags=("B1_G1", "B2_G1", "B3_G1"))
     assert main(["fleet", str(path), "--out", str(tmp / "out")]) == 0
     return tmp, json.loads((tmp / "out" / "fleet.json").read_text())
 
@@ -75,6 +84,20 @@ def test_fleet_dyr_falls_back_for_an_unsimulated_model(fleet_run):
     # the surrogate validates active power/frequency only, and says so
     assert u["validation"]["model"] == "surrogate" and u["validation"]["channels"] == ["P_t", "x2"]
     assert "reactive power/voltage is not validated" in u["validation"]["scope"]
+
+
+def test_fleet_dyr_plays_a_stiff_record_back_with_kvaerno5(fleet_run):
+    """Its own records, no setting changed: the unit the explicit step cannot follow is found from
+    its modes at rest and played back with Kvaerno5, and the plant says so. (ANDES recorded B3_G1
+    with its true X''d, 0.34 pu: the playback need not match the recording, only run.)"""
+    tmp, doc = fleet_run
+    u = {e["name"]: e for e in doc["units"]}
+    assert u["B3_G1"]["playback_model"] == "dyr" and "playback_fallback" not in u["B3_G1"]
+    stiff = [n for n in u["B3_G1"]["playback_notes"] if "stiff: fastest mode -" in n]
+    assert len(stiff) == 1 and "Kvaerno5" in stiff[0], u["B3_G1"]["playback_notes"]
+    assert all(np.isfinite(v) for v in u["B3_G1"]["playback_rms_percent_mbase"].values())
+    assert not any("stiff" in n for n in u["B1_G1"]["playback_notes"])
+    assert "Kvaerno5" in (tmp / "out" / "units" / "B3_G1.html").read_text()
 
 
 def test_validate_recovers_planted_h_and_round_trips(tmp_path):

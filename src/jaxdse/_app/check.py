@@ -65,7 +65,6 @@ import math
 import time
 from collections import Counter
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import NamedTuple
 
@@ -78,6 +77,7 @@ import numpy as np
 from .._dyr.inventory import GENERATOR_CATEGORIES, Inventory, inventory
 from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings
 from .._dyr.records import UnitModel, record_kind, unit_model
+from .._dyr.stiff import EXPLICIT_LIMIT, kvaerno5, modes, stiff_note, too_stiff
 from .._dyr.unit import DyrUnit, UnitInputs
 from .._io.errors import InputError
 from .._io.psse import (
@@ -94,6 +94,7 @@ from .._io.psse import (
     record_label,
 )
 from .._io.schema import build, no_unknown, options, read_toml, subtable
+from .._many.waits import Expired, Task, bounded, executing
 from .._models.exciters import EXCITERS
 from .._models.governors import GOVERNORS
 from .._models.machines import MACHINES
@@ -317,8 +318,10 @@ class _Result(NamedTuple):
     omega: jax.Array
     delta: jax.Array
     dy_end: jax.Array
-    growth_end: jax.Array
-    fastest_end: jax.Array
+    jac_t0: jax.Array
+    """d(vector field)/d(state) at the initial state, held input (the modes: on the host)."""
+    jac_end: jax.Array
+    """... at the end of the run."""
     ok: jax.Array
 
 
@@ -327,6 +330,7 @@ def _one(unit: DyrUnit, lane: _Lane, run: _Run) -> _Result:
     u0 = UnitInputs(lane.v_re, lane.v_im, zero, zero)
     y0, refs = unit.initial_state(u0, lane.i_re, lane.i_im)
     dy0 = unit.vector_field(y0, u0, refs)
+    jac0 = jax.jacfwd(lambda y: unit.vector_field(y, u0, refs))(y0)
     out0, efd_t0, tm_t0, _ = unit.signals(y0, u0, refs)
     v0 = jnp.hypot(lane.v_re, lane.v_im)
 
@@ -352,16 +356,17 @@ def _one(unit: DyrUnit, lane: _Lane, run: _Run) -> _Result:
     ok = solved & jnp.all(jnp.isfinite(ys))
     y_end = jnp.where(ok, ys[-1], y0)
     dy_end = rhs(run.end_s, y_end, None)
-    growth, fastest = _modes(lambda y: rhs(run.end_s, y, None), y_end)
+    jac_end = jax.jacfwd(lambda y: rhs(run.end_s, y, None))(y_end)
     return _Result(dy0, y0, refs.efd0_pu, refs.tm0_pu, refs.vref_pu, efd_t0, tm_t0, out0.ifd_pu,
-                   p, q, ys[:, m - 1], ys[:, m - 2], dy_end, growth, fastest, ok)
+                   p, q, ys[:, m - 1], ys[:, m - 2], dy_end, jac0, jac_end, ok)
 
 
 def _integrate(rhs, y0, run: _Run, n: int):
     """(states at the ``n`` frames, solved): Tsit5 at ``substeps`` fixed steps per frame as a
     plain scan of the solver's steps (diffeqsolve's SaveAt(ts=...) brings a runtime check, a
     host callback that keeps the executable out of JAX's persistent compilation cache), or
-    Kvaerno5 with an adaptive step through diffeqsolve."""
+    Kvaerno5 with an adaptive step through diffeqsolve (its Newton solves without LAPACK:
+    :func:`~jaxdse._dyr.stiff.kvaerno5`)."""
     term = diffrax.ODETerm(rhs)
     if run.solver == "tsit5":
         solver = diffrax.Tsit5()
@@ -379,27 +384,12 @@ def _integrate(rhs, y0, run: _Run, n: int):
 
         _, ys = jax.lax.scan(frame, (y0, solver.init(term, 0.0, h, y0, None)), jnp.arange(n - 1))
         return jnp.concatenate([y0[None], ys]), jnp.asarray(True)
-    sol = diffrax.diffeqsolve(term, diffrax.Kvaerno5(), 0.0, run.end_s, 1.0 / run.frame_hz, y0,
+    sol = diffrax.diffeqsolve(term, kvaerno5(), 0.0, run.end_s, 1.0 / run.frame_hz, y0,
                               saveat=diffrax.SaveAt(ts=np.arange(n) / run.frame_hz),
                               stepsize_controller=diffrax.PIDController(rtol=1e-7, atol=1e-9,
                                                                         jump_ts=[run.step_at_s]),
                               max_steps=64 * n, throw=False)
     return sol.ys, sol.result == diffrax.RESULTS.successful
-
-
-def _modes(f, y):
-    """(largest, smallest) real part of the eigenvalues of d f/d y at ``y`` [1/s], the zero
-    eigenvalues of states that do not move (bypassed blocks, integrators on a limit, references)
-    aside: the largest below 0, what motion is left decays (its time constant -1/largest); the
-    smallest tells whether an explicit fixed step can follow the fastest mode."""
-    ev = jnp.linalg.eigvals(jax.jacfwd(f)(y))
-    moving = jnp.abs(ev) > 1e-8
-    return jnp.max(jnp.where(moving, ev.real, -jnp.inf)), jnp.min(jnp.where(moving, ev.real, jnp.inf))
-
-
-EXPLICIT_LIMIT = 3.3
-"""An explicit Runge-Kutta step h follows a real mode lambda only while h |lambda| stays below
-about this (Tsit5's and Dormand-Prince's stability region on the negative real axis)."""
 
 
 def _batch_fn():
@@ -414,10 +404,15 @@ def _batch_fn():
 _BATCH: list = []
 
 
-def _batch(units, lanes, run):
+def _batch_jit():
+    """The jitted vmapped :func:`_one` (made once)."""
     if not _BATCH:
         _BATCH.append(_batch_fn())
-    return _BATCH[0](units, lanes, run)
+    return _BATCH[0]
+
+
+def _batch(units, lanes, run):
+    return _batch_jit()(units, lanes, run)
 
 
 def _stack(trees):
@@ -453,7 +448,13 @@ def _state_name(unit: DyrUnit, models: dict, k: int) -> str:
 
 
 def _at(r: _Result, j: int) -> dict:
-    return {f: np.asarray(getattr(r, f)[j]) for f in r._fields}
+    """Lane ``j`` of ``r`` (host arrays), with its modes computed from the Jacobians (host NumPy,
+    :func:`~jaxdse._dyr.stiff.modes`): ``growth_end``, ``fastest_end`` (at the end of the run)
+    and ``fastest_t0`` (at the initial state)."""
+    out = {f: np.asarray(getattr(r, f)[j]) for f in r._fields}
+    out["growth_end"], out["fastest_end"] = modes(out["jac_end"])
+    out["fastest_t0"] = modes(out["jac_t0"])[1]
+    return out
 
 
 def _limit(rec: DyrRecord, c) -> dict:
@@ -628,37 +629,76 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
             groups.setdefault(jax.tree_util.tree_structure(st.model.unit), []).append(len(entries) - 1)
     run = _Run(solver=case.playback.solver, substeps=case.playback.substeps, frame_hz=spec.frame_hz,
                end_s=spec.end_s, step_at_s=spec.step_at_s)
+    h = 1.0 / (run.frame_hz * run.substeps)
     bar = Progress(len(groups)) if progress is True else None
     report = progress if callable(progress) else (bar.step if bar is not None else (lambda _: None))
     order = sorted(groups.values(), key=len, reverse=True)
+    n_workers = workers or _threads(len(order))
+    from .._many.runner import _same_context_in_threads
 
-    def one_group(members: list[int]) -> tuple[list[int], _Result, float]:
+    in_threads = _same_context_in_threads()
+    done: dict = {}
+    """unit index -> (held lane, step lane, the _Run it was integrated with)"""
+    times: list = []
+
+    def one_group(members: list[int], how: _Run) -> tuple[_Result, float]:
         t0 = time.perf_counter()
         units = [statics[k].model.unit for k in members]
         lanes = [_lane(raw, gens[k], x) for x in (0.0, spec.step) for k in members]
-        res = jax.device_get(_batch(_stack(units + units), _stack(lanes), run))
-        return members, res, time.perf_counter() - t0
+        args = (_stack(units + units), _stack(lanes), how)
+        compiled = _batch_jit().lower(*args).compile()
+        executing()   # the group's run limit counts from here
+        return jax.device_get(compiled(*args)), time.perf_counter() - t0
 
-    # one compiled call per model structure; groups compile and run side by side on the cores
-    n_workers = workers or _threads(len(order))
-    with ThreadPoolExecutor(n_workers) as pool:
-        results = []
-        for members, res, dt in pool.map(one_group, order):
-            results.append((members, res, dt))
-            report(f"{_chain(entries[members[0]])}: {len(members)} unit(s), {dt:.1f} s")
-    for members, res, _ in results:
-        n = len(members)
-        for j, k in enumerate(members):
-            outcome, reasons, numbers, limits = _judge(
-                statics[k], gens[k], raw, _at(res, j), _at(res, n + j), spec,
-                (run.solver, 1.0 / (run.frame_hz * run.substeps)))
-            if outcome == "fail" and statics[k].warnings:
-                outcome, reasons = "data problem", statics[k].warnings + [f"hence: {r}" for r in reasons]
-                entries[k]["records_at_fault"] = [statics[k].models["machine"]]
-            entries[k].update(outcome=outcome, reasons=reasons, numbers=numbers)
-            if limits:
-                entries[k]["limits"] = limits
-                entries[k]["records_at_fault"] = [lim["record"] for lim in limits]
+    def execute(batches: list[tuple[list[int], _Run]]) -> None:
+        # one compiled call per model structure and solver, side by side on the cores; every
+        # wait bounded (a limit from the group's work), an expired group's units marked
+        tasks = [Task(f"group {_chain(entries[m[0]])} ({len(m)} unit(s), {how.solver})",
+                      wait_limit_s(len(m), spec, how.solver, how.substeps),
+                      lambda m=m, how=how: one_group(m, how), COMPILE_LIMIT_S) for m, how in batches]
+        for i, value in bounded(tasks, n_workers, threads=in_threads):
+            members, how = batches[i]
+            if isinstance(value, Expired):
+                for k in members:
+                    entries[k].update(outcome="fail", reasons=[value.reason + " (the compiled run did "
+                                                               "not return; nothing was judged)"])
+                    done.pop(k, None)
+                report(f"{tasks[i].label}: {value.reason}")
+                continue
+            res, dt = value
+            times.append(dt)
+            for j, k in enumerate(members):
+                done[k] = (_at(res, j), _at(res, len(members) + j), how)
+            report(f"{_chain(entries[members[0]])}: {len(members)} unit(s), {how.solver}, {dt:.1f} s")
+
+    execute([(m, run) for m in order])
+    # units whose fastest mode at the initial state the explicit fixed step cannot follow: again,
+    # with Kvaerno5 (implicit), and said so
+    stiff: dict = {}
+    if run.solver == "tsit5":
+        for k, (held, _, _) in done.items():
+            if too_stiff(float(held["fastest_t0"]), h):
+                stiff.setdefault(jax.tree_util.tree_structure(statics[k].model.unit), []).append(k)
+    if stiff:
+        implicit = _Run(solver="kvaerno5", substeps=run.substeps, frame_hz=spec.frame_hz,
+                        end_s=spec.end_s, step_at_s=spec.step_at_s)
+        if bar is not None:
+            bar.total += len(stiff)
+        for members in stiff.values():
+            for k in members:
+                entries[k]["notes"].append(stiff_note(float(done.pop(k)[0]["fastest_t0"]), h, "Tsit5"))
+                entries[k]["solver"] = "kvaerno5"
+        execute([(m, implicit) for m in sorted(stiff.values(), key=len, reverse=True)])
+    for k, (held, step, how) in done.items():
+        outcome, reasons, numbers, limits = _judge(
+            statics[k], gens[k], raw, held, step, spec, (how.solver, 1.0 / (how.frame_hz * how.substeps)))
+        if outcome == "fail" and statics[k].warnings:
+            outcome, reasons = "data problem", statics[k].warnings + [f"hence: {r}" for r in reasons]
+            entries[k]["records_at_fault"] = [statics[k].models["machine"]]
+        entries[k].update(outcome=outcome, reasons=reasons, numbers=numbers)
+        if limits:
+            entries[k]["limits"] = limits
+            entries[k]["records_at_fault"] = [lim["record"] for lim in limits]
     checked = {id(a) for a in accounts}
     doc = {
         "jaxdse_version": __version__,
@@ -667,14 +707,14 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         "check": {**dataclasses.asdict(spec), "solver": case.playback.solver,
                   "step_s": 1.0 / (spec.frame_hz * case.playback.substeps),
                   "ke_zero": case.playback.ke_zero},
-        "summary": {**_summary(entries, off if not out_of_service else 0, len(order)),
+        "summary": {**_summary(entries, off if not out_of_service else 0, len(order) + len(stiff)),
                     "accounting": accounting(inv, entries)},
         "units": entries,
         "not_checked": [a.as_dict() for a in inv.generators if id(a) not in checked],
         "dyr_records_not_used": [r.as_dict() for r in inv.records],
         "dyr_records_unreadable": list(inv.unreadable),
         "wall_time_s": time.perf_counter() - t_start,
-        "group_times_s": [dt for _, _, dt in results],
+        "group_times_s": times,
     }
     _finite(doc)
     return doc
@@ -740,6 +780,26 @@ def _accounting_lines(doc: dict, most: int = 5) -> list[str]:
     for line in doc["dyr_records_unreadable"]:
         lines.append(f"        unreadable .dyr record, not used: {line}")
     return lines
+
+
+COMPILE_LIMIT_S = 1800.0
+"""The wait on one group's compile [s]: Kvaerno5's took 41 s of CPU and 143 s of wall time on 2
+cores loaded 7-fold (a unit of GENROU ESST3A TGOV1), Tsit5's 6 s and 22 s."""
+WAIT_BASE_S = 60.0
+"""The wait on one group's compiled run: this much [s] ..."""
+WAIT_PER_LANE_STEP_S = 2e-4
+"""... plus this much per integration step of each of its runs [s] (2 runs per unit; Kvaerno5
+counted at 8 steps per frame). On ACTIVSg2000 with both cores loaded 7-fold, 205 units of
+GENROU ESST4B IEEEST GGOV1 took 64 s, compile included (3 us per lane-step): the limit (266 s)
+is 4 times that."""
+
+
+def wait_limit_s(units: int, spec: CheckSpec, solver: str, substeps: int) -> float:
+    """How long the check waits for a group of ``units`` units' compiled call [s] before it
+    marks them timed out (:data:`WAIT_BASE_S`, :data:`WAIT_PER_LANE_STEP_S`)."""
+    frames = int(round(spec.end_s * spec.frame_hz))
+    steps = frames * (substeps if solver == "tsit5" else 8)
+    return WAIT_BASE_S + WAIT_PER_LANE_STEP_S * 2 * units * steps
 
 
 def _threads(groups: int) -> int:

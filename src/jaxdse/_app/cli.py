@@ -752,6 +752,9 @@ def main(argv=None) -> int:
     except InputError as err:
         print(f"jaxdse: error: {err}", file=sys.stderr)
         return 2
+    except TimeoutError as err:  # a compiled run that did not return within its limit
+        print(f"jaxdse: error: {err}", file=sys.stderr)
+        return 1
     except OSError as err:
         print(f"jaxdse: error: {err.filename or ''}: {err.strerror or err}", file=sys.stderr)
         return 2

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor, as_completed
 from typing import Literal, NamedTuple
 
 import equinox as eqx
@@ -20,10 +19,18 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._dyr.playback import PlaybackSettings, TerminalSeries, play_back
+from .._dyr.playback import (
+    PlaybackSettings,
+    TerminalSeries,
+    initial_operating_point,
+    play_back,
+    steady_start,
+)
 from .._dyr.records import UnitModel, unit_model
+from .._dyr.stiff import modes, stiff_note, too_stiff
 from .._many import programs
-from .._many.runner import threads
+from .._many.runner import _same_context_in_threads, threads
+from .._many.waits import Expired, Task, bounded
 from .._models.exciters import EXCITERS
 from .._models.stabilisers import STABILISERS
 
@@ -43,7 +50,9 @@ class PlaybackOptions:
     active power/frequency only)."""
     solver: Literal["tsit5", "kvaerno5"] = "tsit5"
     """"tsit5" (explicit, adaptive per frame) or "kvaerno5" (implicit, adaptive) for the .dyr
-    model (:class:`~jaxdse.PlaybackSettings`)."""
+    model (:class:`~jaxdse.PlaybackSettings`). With "tsit5", a unit whose fastest mode at its
+    initial state an explicit step of 1/substeps of a frame cannot follow (``jaxdse._dyr.stiff``)
+    is integrated with Kvaerno5, and its notes say so."""
     substeps: int = 4
     """The first step of each frame is 1/substeps of it ("tsit5")."""
     ke_zero: Literal["psse", "literal"] = "psse"
@@ -167,6 +176,32 @@ def _batch(units, series, settings):
     return r.p_pu, r.q_pu, r.omega_pu, r.ok
 
 
+def _start(unit, series, settings):
+    """d(vector field)/d(state) at the unit's initial state (as :func:`play_back` starts it):
+    its modes, computed on the host, tell whether the explicit step can follow it."""
+    u0, i_re, i_im = initial_operating_point(steady_start(series, settings), settings)
+    y0, refs = unit.initial_state(u0, i_re, i_im)
+    return jax.jacfwd(lambda y: unit.vector_field(y, u0, refs))(y0)
+
+
+def _starts(units, series, settings):
+    return (eqx.filter_vmap(_start, in_axes=(0, 0, None))(units, series, settings),)
+
+
+COMPILE_LIMIT_S = 1800.0
+"""The wait on one call's compile [s] (minutes on a loaded machine: ``jaxdse._app.check``)."""
+WAIT_BASE_S = 60.0
+"""The wait on one call of the playback, once compiled: this much [s] ..."""
+WAIT_PER_UNIT_FRAME_S = 2e-3
+"""... plus this much per unit and frame [s]: generous (an adaptive playback takes a few steps
+per frame; a stuck call is found out, not a slow one cut short)."""
+
+
+def wait_limit_s(units: int, frames: int) -> float:
+    """How long the playback waits for a call of ``units`` units of ``frames`` frames [s]."""
+    return WAIT_BASE_S + WAIT_PER_UNIT_FRAME_S * units * frames
+
+
 def _stack(trees):
     return jax.tree.map(lambda *x: jnp.stack(x), *trees)
 
@@ -180,6 +215,9 @@ class PlantPlayback:
     x2_rad_s: np.ndarray
     """MBASE-weighted rotor speed deviation [rad/s]."""
     ok: bool
+    notes: list = dataclasses.field(default_factory=list)
+    """What the playback of the plant's units adds to their records' notes (a stiff unit
+    integrated with Kvaerno5; a call that did not return within its limit)."""
 
 
 @dataclasses.dataclass
@@ -191,10 +229,13 @@ class DyrOutcome:
 
     def entry(self, surrogate_rms: dict) -> dict:
         """The fleet.json fields of the .dyr playback."""
-        out = {"playback_models": self.model.models, "playback_notes": self.model.notes,
+        notes = self.model.notes + ([] if self.playback is None else self.playback.notes)
+        out = {"playback_models": self.model.models, "playback_notes": notes,
                "surrogate_playback_rms_percent_mbase": surrogate_rms}
         if self.playback is None:
             out["playback_fallback"] = self.model.fallback
+        elif not self.playback.ok and any(n.startswith("timed out") for n in self.playback.notes):
+            out["playback_fallback"] = next(n for n in self.playback.notes if n.startswith("timed out"))
         elif not self.playback.ok:
             out["playback_fallback"] = ("the .dyr playback did not reach the end (solver failure "
                                         "or non-finite states)")
@@ -206,7 +247,11 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
     base)}; yields (name, PlantPlayback) as each plant's units are done. Units of one structure
     and length share a call; the calls trace, compile and run side by side on the cores (a call
     blocks its thread until its result is ready), the largest first, so that the caller's work
-    on the plants done overlaps the calls still running."""
+    on the plants done overlaps the calls still running. With ``solver = "tsit5"``, each unit's
+    modes at its initial state are computed first (the Jacobians from one call per group, the
+    eigenvalues on the host), and a unit the explicit step cannot follow is played back with
+    Kvaerno5 (noted). Every wait is bounded (:func:`wait_limit_s`): a call that does not return
+    in time leaves its units not ``ok``, the reason in the plant's notes."""
     flat = []
     for name, (pm, series) in jobs.items():
         m_total = float(np.sum(pm.mbase_mva))
@@ -219,28 +264,69 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
             s = terminal_series(series.t_s, series.v_mag_pu, series.v_ang_rad,
                                 p * pm.share_p[k] * scale, q * pm.share_q[k] * scale)
             flat.append((name, k, um.unit, s))
-    groups: dict = {}
-    for item in flat:
-        key = (jax.tree_util.tree_structure(item[2]), int(item[3].t_s.shape[0]))
-        groups.setdefault(key, []).append(item)
+    in_threads = _same_context_in_threads()
+
+    def grouped(items, key=lambda it: ()):
+        groups: dict = {}
+        for it in items:
+            groups.setdefault((jax.tree_util.tree_structure(it[2]), int(it[3].t_s.shape[0]), key(it)),
+                              []).append(it)
+        return sorted(groups.values(), key=len, reverse=True)
+
+    def label(items, settings):
+        return (f"the .dyr playback of {len(items)} unit(s) of {int(items[0][3].t_s.shape[0])} frames "
+                f"({settings.solver}; plants {', '.join(dict.fromkeys(it[0] for it in items))})")
+
+    settings = options.settings
+    notes: dict = {name: [] for name in jobs}
+    stiff = set()
+    if settings.solver == "tsit5":
+        # each unit's modes at its initial state (Jacobians from the compiled call, eigenvalues
+        # here): a unit the explicit step cannot follow is played back with Kvaerno5
+        order = grouped(flat)
+        tasks = [Task(label(items, settings) + ": its initial state",
+                      wait_limit_s(len(items), int(items[0][3].t_s.shape[0])),
+                      lambda items=items: programs.call("_starts", _starts, _stack([it[2] for it in items]),
+                                                        _stack([it[3] for it in items]), settings)[0],
+                      COMPILE_LIMIT_S) for items in order]
+        for i, jac in bounded(tasks, threads(len(order)), threads=in_threads):
+            if isinstance(jac, Expired):
+                continue   # the playback itself is bounded and marked below
+            jac = np.asarray(jax.device_get(jac))
+            for j, (name, k, unit, series) in enumerate(order[i]):
+                fastest = modes(jac[j])[1]
+                dt = float(series.t_s[1] - series.t_s[0])
+                if too_stiff(fastest, dt / settings.substeps):
+                    stiff.add((name, k))
+                    notes[name].append(f"unit {k + 1} ({jobs[name][0].units[k].models['machine']}): "
+                                       + stiff_note(fastest, dt / settings.substeps, "Tsit5"))
+    implicit = dataclasses.replace(options, solver="kvaerno5").settings
+    order = grouped(flat, key=lambda it: (it[0], it[1]) in stiff)
 
     def run(items):
+        how = implicit if (items[0][0], items[0][1]) in stiff else settings
         units, series = _stack([it[2] for it in items]), _stack([it[3] for it in items])
-        played = programs.call("_batch", _batch, units, series, options.settings)
-        return items, _Played(*jax.device_get(played))
+        return _Played(*jax.device_get(programs.call("_batch", _batch, units, series, how)))
 
-    order = sorted(groups.values(), key=len, reverse=True)
+    tasks = [Task(label(items, implicit if (items[0][0], items[0][1]) in stiff else settings),
+                  wait_limit_s(len(items), int(items[0][3].t_s.shape[0])), lambda items=items: run(items),
+                  COMPILE_LIMIT_S) for items in order]
     results: dict = {}
     left = {name: len(pm.units) for name, (pm, _) in jobs.items()}
-    with ThreadPoolExecutor(threads(len(order))) as pool:
-        for done in as_completed([pool.submit(run, items) for items in order]):
-            items, res = done.result()
-            for j, (name, k, _, _) in enumerate(items):
+    for i, res in bounded(tasks, threads(len(order)), threads=in_threads):
+        for j, (name, k, _, series) in enumerate(order[i]):
+            if isinstance(res, Expired):
+                nan = np.full(np.shape(series.t_s), np.nan)
+                results[(name, k)] = _Played(nan, nan, nan, np.asarray(False))
+                notes[name].append(f"unit {k + 1}: {res.reason}")
+            else:
                 results[(name, k)] = jax.tree.map(lambda a, j=j: a[j], res)
-                left[name] -= 1
-                if not left[name]:
-                    pm = jobs[name][0]
-                    yield name, _plant_playback(pm, [results.pop((name, i)) for i in range(len(pm.units))])
+            left[name] -= 1
+            if not left[name]:
+                pm = jobs[name][0]
+                pb = _plant_playback(pm, [results.pop((name, i)) for i in range(len(pm.units))])
+                pb.notes = notes[name]
+                yield name, pb
 
 
 def _plant_playback(pm: PlantModel, rs: list) -> PlantPlayback:

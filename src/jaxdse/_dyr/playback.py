@@ -21,6 +21,7 @@ from jaxtyping import Array, Float
 
 from .._core.lti import zero_phase_lowpass
 from .._core.signals import jumps
+from .stiff import kvaerno5
 from .unit import DyrUnit, UnitInputs, UnitReferences
 
 
@@ -32,7 +33,8 @@ class PlaybackSettings(eqx.Module):
     interval (a ``lax.scan`` over the frames: under vmap each interval waits only for its own
     slowest unit), about 2 steps per frame on a smooth stretch and as many as a fault's fast
     transient needs; "kvaerno5": implicit (L-stable), adaptive over the whole recording, for
-    units whose blocks are too fast for an explicit step."""
+    units whose blocks are too fast for an explicit step (its Newton solves without LAPACK:
+    :func:`~jaxdse._dyr.stiff.kvaerno5`)."""
     substeps: int = eqx.field(static=True, default=4)
     """The first step of each frame interval is 1/``substeps`` of it."""
     max_steps_per_frame: int = eqx.field(static=True, default=256)
@@ -260,7 +262,7 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
             return jax.tree_util.tree_map(lambda d: dt * d,
                                           unit.vector_field(y, inputs(*_frame_of(s)), refs))
 
-        sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), diffrax.Kvaerno5(), 0.0,
+        sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), kvaerno5(), 0.0,
                                   float(ts.shape[0] - 1), 1.0 / settings.substeps, y0,
                                   saveat=diffrax.SaveAt(ts=np.arange(ts.shape[0], dtype=float)),
                                   stepsize_controller=controller, max_steps=64 * ts.shape[0],

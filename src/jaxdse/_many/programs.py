@@ -26,12 +26,15 @@ import equinox as eqx
 import jax
 from jax import export
 
+from .waits import executing
+
 FOLDER = "jaxdse_exported"
 """Subfolder of the compilation cache folder that holds the exported programs."""
 
 _LOCK = threading.Lock()
 _LOADED: dict[str, export.Exported] = {}
 _JITTED: dict[Callable, Callable] = {}
+_COMPILED: dict = {}
 _SOURCE: list[str] = []
 
 
@@ -73,10 +76,25 @@ def call(name: str, fn: Callable, *args):
         except Exception:   # noqa: BLE001 - a program export cannot take: traced as before
             program = None
         if program is not None:
-            return tuple(program.call(*leaves))
+            compiled = _compiled(("exported", id(program), treedef), lambda: jax.jit(program.call), leaves)
+            executing()   # compiled: a bounded wait's run limit starts now (jaxdse._many.waits)
+            return tuple(compiled(*leaves))
     with _LOCK:
         jitted = _JITTED.setdefault(fn, eqx.filter_jit(fn))
-    return tuple(jitted(*args))
+    compiled = jitted.lower(*args).compile()
+    executing()
+    return tuple(compiled(*args))
+
+
+def _compiled(key, make: Callable, leaves):
+    """The compiled executable of ``make()`` for these arrays' shapes (kept per key and shapes)."""
+    key = (key, tuple((tuple(x.shape), str(x.dtype)) for x in leaves))
+    with _LOCK:
+        if key in _COMPILED:
+            return _COMPILED[key]
+    compiled = make().lower(*leaves).compile()
+    with _LOCK:
+        return _COMPILED.setdefault(key, compiled)
 
 
 def _program(folder: Path, name: str, fn: Callable, treedef, static, leaves) -> export.Exported:

@@ -16,7 +16,7 @@ import dataclasses
 import gc
 import os
 from collections.abc import Callable, Sequence
-from concurrent.futures import ThreadPoolExecutor, as_completed, wait
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -32,6 +32,7 @@ from .._core.recording import Recording
 from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
 from .batch import pad_recording, stack
+from .waits import Expired, Pool, Task
 
 BUCKETS_PER_OCTAVE = 4
 """Recording lengths are padded up to one of 4 sizes per doubling (at most 19 % padding), so
@@ -216,27 +217,51 @@ def assess_units(units: Sequence[Unit], config: ObserverConfig = ObserverConfig(
                 f"{plan.length} samples")
 
     report = progress or (lambda _: None)
-    with ThreadPoolExecutor(pool_size) as pool:
-        pending: set = set()
-        for plan in plans:
-            # The group's program is traced and compiled in the calling thread (its JAX contexts
-            # and logs apply); its chunks then run side by side on the pool, while the calling
-            # thread goes on to compile the next group's.
-            with _collector_paused():
-                compiled = run.lower(*chunk(plan, 0), config, settings, identify_settings,
-                                     verdict_settings).compile()
-            starts = range(0, len(plan.members), plan.step)
-            if pool_size > 1:
-                pending |= {pool.submit(call, plan, start, compiled) for start in starts}
-            else:
-                for start in starts:
-                    report(call(plan, start, compiled))
-            finished, pending = wait(pending, timeout=0)
-            for f in finished:
-                report(f.result())
-        for f in as_completed(pending):
-            report(f.result())
+
+    def reported(results) -> None:
+        for _, value in results:
+            if isinstance(value, Expired):
+                raise TimeoutError(f"{value.reason}: the compiled run did not return")
+            report(value)
+
+    # With a thread-local JAX context (``with jax.default_device(...)``) the chunks run in the
+    # calling thread (a new thread would not see it); else on daemon threads, each wait bounded.
+    pool = Pool(pool_size) if pool_size > 1 or _same_context_in_threads() else None
+    for plan in plans:
+        # The group's program is traced and compiled in the calling thread (its JAX contexts
+        # and logs apply); its chunks then run side by side on the pool, while the calling
+        # thread goes on to compile the next group's.
+        with _collector_paused():
+            compiled = run.lower(*chunk(plan, 0), config, settings, identify_settings,
+                                 verdict_settings).compile()
+        for start in range(0, len(plan.members), plan.step):
+            if pool is None:
+                report(call(plan, start, compiled))
+                continue
+            pool.submit(Task(f"{min(plan.step, len(plan.members) - start)} unit(s) of {plan.length} "
+                             f"samples (units {start + 1}-{min(start + plan.step, len(plan.members))} "
+                             f"of {len(plan.members)} in their group)",
+                             wait_limit_s(plan.step, plan.length, identify_settings),
+                             lambda plan=plan, start=start, compiled=compiled: call(plan, start, compiled)))
+        if pool is not None:
+            reported(pool.results(block=False))
+    if pool is not None:
+        reported(pool.results())
     return out
+
+
+WAIT_BASE_S = 300.0
+"""The wait on one compiled call (compiled beforehand) of :func:`assess_units`: this much [s] ..."""
+WAIT_PER_SAMPLE_S = 1e-4
+"""... plus this much per sample of each front end of each unit of the call [s]: generous (a
+stuck call is found out, not a slow one cut short)."""
+
+
+def wait_limit_s(units: int, samples: int, identify_settings: IdentifySettings | None) -> float:
+    """How long :func:`assess_units` waits for a call of ``units`` units of ``samples`` samples
+    [s] before it gives up with a :class:`TimeoutError` naming it."""
+    fronts = 2 + (identify_settings.bootstrap_draws if identify_settings is not None else 0)
+    return WAIT_BASE_S + WAIT_PER_SAMPLE_S * units * samples * fronts
 
 
 @contextlib.contextmanager
