@@ -209,6 +209,31 @@ class OnlineGroup:
         self.started[u] = False
         self.filled = self.filled.at[u].set(0)
 
+    # --- progress ----------------------------------------------------------------------------
+
+    def first_update_samples(self) -> int:
+        """Samples from a segment's first chunk boundary to its first update: the first chunk's
+        slice (with T_ref's stretch), then chunks until the window is full, each with its tail."""
+        return max(self.span + self.start, (self.window.blocks - 1) * self.size + self.span)
+
+    def filling(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per unit, while its window fills (no update yet in its segment): the stream time its
+        segment holds [s] and the stream time its first update needs [s], both from the
+        segment's first sample; NaN for units whose window is full."""
+        seen = self.seg_start >= 0
+        first_slice = -(-self.seg_start // self.size) * self.size
+        have = np.where(seen, self.last_valid - self.seg_start + 1, 0)
+        need = np.where(seen, first_slice - self.seg_start, 0) + self.first_update_samples()
+        full = np.asarray(self.filled) >= self.window.blocks
+        return (np.where(full, np.nan, have / self.rate).astype(float),
+                np.where(full, np.nan, need / self.rate).astype(float))
+
+    def wait_reason(self) -> str:
+        """What a segment's first update waits for, in words."""
+        stretch = (self.start + self.size + self.tail) / self.rate
+        return (f"T_ref and the governor's start from the segment's first {stretch:g} s, then a full "
+                f"{self.window.window_s:g} s window and the {self.tail / self.rate:g} s after it")
+
     # --- chunks ------------------------------------------------------------------------------
 
     def _slices(self, units, span):
