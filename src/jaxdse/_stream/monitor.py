@@ -379,6 +379,9 @@ SUMMARY_KEYS = {
                "time (the stream's own clock, as its frames' timestamps and arrivals show it): the same at "
                "any --speed",
     "wall_delay_s": "the same delay in wall seconds (delay_s divided by the stream's pace)",
+    "monitor_s": "per emission of updates, wall seconds from the newest frame's arrival to it (the main "
+                 "thread's queue and processing): delay_s is the stream time from the window's end to the newest "
+                 "frame (the estimate's own wait: its lookahead and the reorder buffer) plus this times the pace",
     "pace": "per stream, stream seconds per wall second (1 in real time; 5 for pmu-sim --speed 5)",
     "processing_ms_per_frame": "the main thread's time per data frame, its updates included [ms]",
 }
@@ -430,6 +433,10 @@ class StreamClock:
         if self.first is None or self.newest[1] - self.first[1] < self.MIN_SPAN_S:
             return self.pace_before
         return (self.newest[0] - self.first[0]) / (self.newest[1] - self.first[1])
+
+    def since_newest(self, wall: float) -> float | None:
+        """Wall seconds from the newest frame's arrival to ``wall`` (None: no frame yet)."""
+        return None if self.newest is None else wall - self.newest[1]
 
     def now(self, wall: float) -> float | None:
         """The stream's time [s since 1970] at ``wall`` [monotonic s] (None: no frame yet)."""
@@ -499,6 +506,13 @@ class _Stream:
         self.rate = frame.rate_hz
         self.reorder = max(0, math.ceil(self.spec.reorder_s * self.rate - 1e-9))
         self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream")
+        t0 = time.perf_counter()
+        self.log(f"stream {self.k}: compiling the estimators' programs ({len(self.groups)} group(s): up to a "
+                 "minute the first time, seconds from the compilation cache; frames wait in the queue meanwhile)")
+        for group, _ in self.groups:      # the compiler now, while the window fills
+            group.warm_up()
+        self.log(f"stream {self.k}: the estimators' programs ready ({len(self.groups)} group(s), "
+                 f"{time.perf_counter() - t0:.1f} s)")
         self.heap, self.held, self.released, self.newest = [], set(), None, None
         self.used_recent, self.used_order = set(), []
         self._new_part()
@@ -698,6 +712,7 @@ class Monitor:
         self.latest = {}
         self.delays = []         # [s of stream time] per update, from the window's last frame
         self.wall_delays = []    # the same [s of wall time]
+        self.monitor_s = []      # [s of wall time] per emission, from the newest frame's arrival to it
         self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
         self._next_report = None
         self.publisher = None
@@ -724,8 +739,11 @@ class Monitor:
         last frames flushed at the stop, which waited for it)."""
         now = pace = None
         if stream is not None and updates:
-            now = stream.clock.now(time.monotonic())
+            w = time.monotonic()
+            now = stream.clock.now(w)
             pace = stream.clock.pace or 1.0
+            if now is not None and timed:
+                self.monitor_s.append(stream.clock.since_newest(w))
         for u in updates:
             alarm = self._alarm(u)
             delay = wall = None
@@ -882,7 +900,8 @@ class Monitor:
     def _delays(self, recent: int | None = None) -> dict:
         """The delays from a frame's timestamp to its estimate: in stream time and in wall time."""
         out = {}
-        for key, d in (("delay_s", self.delays), ("wall_delay_s", self.wall_delays)):
+        for key, d in (("delay_s", self.delays), ("wall_delay_s", self.wall_delays),
+                       ("monitor_s", self.monitor_s)):
             d = np.asarray(d if recent is None else d[-recent:])
             out[key] = None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99)),
                                                  "max": float(d.max())}
