@@ -633,7 +633,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--out", metavar="DIR", default=None,
                     help="folder for updates.jsonl, the recording and monitor.json (default: none)")
     mo.add_argument("--duration", type=float, default=None, metavar="S",
-                    help="stop cleanly after S seconds (default: run until Ctrl-C)")
+                    help="stop cleanly after S seconds, not counting the compilation of the estimators at a "
+                         "stream's configuration (default: run until Ctrl-C)")
     mo.set_defaults(func=_monitor)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,

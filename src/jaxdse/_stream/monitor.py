@@ -61,6 +61,9 @@ MAX_PENDING_FRAMES = 4096
 grid slots remembered to tell a repeated frame from a late one."""
 PROGRESS_S = 5.0
 """While a unit's window fills (no estimate yet), a line every this many seconds [s, wall]."""
+READY_S = 600.0
+"""A reader waits at most this long [s] for the main thread to take a stream's configuration
+(and compile the estimators) before it turns data on."""
 QUEUE_SIZE = 100_000
 """Items (frames, counts, connection events) waiting for the main thread."""
 
@@ -235,12 +238,15 @@ def tiled(runs: list, copies: int) -> list:
 
 # --- the connections -------------------------------------------------------------------------
 
-def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log):
+def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log,
+            ready: threading.Event | None = None):
     """One stream's thread: connect, ask for the configuration, read; reconnect with back-off.
 
     Puts (k, kind, x, arrival) on ``out``: "frame" (a configuration or data frame), "up",
     "down" and "refused" (text), "counts" (the decoder's counts); ``arrival``: time.monotonic()
-    when the frame's bytes came. Every wait ends: the connection's and each read's within
+    when the frame's bytes came. Data is turned on once ``ready`` is set (the main thread has
+    taken the configuration and compiled the estimators: no backlog of frames behind the
+    compiler), or after ``READY_S``. Every wait ends: the connection's and each read's within
     ``timeout_s``, a full queue (the main thread took nothing) within ``timeout_s`` too."""
     backoff = Backoff()
     consumer = "the monitor's main thread"
@@ -254,6 +260,12 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
             with PmuClient(spec.host, spec.port, spec.idcode, timeout=spec.timeout_s,
                            udp=spec.transport == "udp") as pmu:
                 send("frame", pmu.config(c3.CFG2))
+                deadline = time.monotonic() + READY_S
+                while ready is not None and not ready.wait(0.2) and not stop.is_set():
+                    if time.monotonic() > deadline:
+                        log(f"stream {k}: the estimators were not ready {READY_S:g} s after the configuration "
+                            "came; data turned on anyway")
+                        break
                 pmu.start()
                 send("up", f"{spec.host}:{spec.port}")
                 up = True
@@ -475,6 +487,8 @@ class _Stream:
         self.decoder_done = defaultdict(int)   # the reader's counts of the connections before this one
         self.decoder_now = {}                  # ... and of this one
         self.clock = StreamClock()
+        self.ready = threading.Event()          # the configuration taken, the estimators compiled
+        self.compile_s = 0.0                    # [s] the main thread spent compiling them
         self.unusable = np.zeros(len(units), np.int64)
         self.stale = np.zeros(len(units), np.int64)
         self._forget_samples()
@@ -508,9 +522,11 @@ class _Stream:
         self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream")
         t0 = time.perf_counter()
         self.log(f"stream {self.k}: compiling the estimators' programs ({len(self.groups)} group(s): up to a "
-                 "minute the first time, seconds from the compilation cache; frames wait in the queue meanwhile)")
+                 "minute the first time, seconds from the compilation cache; data is turned on once they are "
+                 "ready)")
         for group, _ in self.groups:      # the compiler now, while the window fills
             group.warm_up()
+        self.compile_s += time.perf_counter() - t0
         self.log(f"stream {self.k}: the estimators' programs ready ({len(self.groups)} group(s), "
                  f"{time.perf_counter() - t0:.1f} s)")
         self.heap, self.held, self.released, self.newest = [], set(), None, None
@@ -813,16 +829,17 @@ class Monitor:
                 self.log(f"stream {s.k}: {line}")
 
     def run(self, duration_s: float | None = None) -> dict:
-        """Monitor until ``duration_s`` seconds pass (None: until interrupted); returns the summary."""
+        """Monitor until ``duration_s`` seconds pass, not counting the compilation of the
+        estimators at a stream's configuration (None: until interrupted); returns the summary."""
         q: queue.Queue = queue.Queue(maxsize=QUEUE_SIZE)
         stop = threading.Event()
         threads = []
         for k, s in enumerate(self.streams):
-            target, args = _reader, (k, s.spec, q, stop, self.log)
+            target, args = _reader, (k, s.spec, q, stop, self.log, s.ready)
             if s.spec.protocol == "sttp":
                 from .sttp import reader as target
 
-                args += ([given or full for given, full, _ in s.wanted],)
+                args = args[:5] + ([given or full for given, full, _ in s.wanted],)
             threads.append(threading.Thread(target=target, args=args, daemon=True, name=f"jaxdse-stream-{k}"))
         for t in threads:
             t.start()
@@ -839,7 +856,7 @@ class Monitor:
         t0 = time.monotonic()
         next_progress = t0 + self.progress_s
         try:
-            while duration_s is None or time.monotonic() - t0 < duration_s:
+            while duration_s is None or time.monotonic() - t0 - sum(s.compile_s for s in self.streams) < duration_s:
                 try:
                     self._handle(q.get(timeout=0.05))
                 except queue.Empty:
@@ -851,8 +868,8 @@ class Monitor:
             self.log("interrupted")
         finally:
             stop.set()
-            for s, t in zip(self.streams, threads):    # a reader's every wait ends within timeout_s
-                join(t, s.spec.timeout_s + 1.0, f"reading stream {s.k} from {s.spec.host}:{s.spec.port}",
+            for s, t in zip(self.streams, threads):    # a reader's longest step: a connection or read, then a put
+                join(t, 2.0 * s.spec.timeout_s + 1.0, f"reading stream {s.k} from {s.spec.host}:{s.spec.port}",
                      self.log)
             while True:    # what was received before the stop is used and recorded
                 try:
@@ -877,6 +894,7 @@ class Monitor:
             t0 = time.perf_counter()
             if isinstance(x, c3.ConfigFrame):
                 self.emit(s.on_config(x), s)
+                s.ready.set()
             else:
                 if s.config is not None:
                     s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
