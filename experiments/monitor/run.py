@@ -58,6 +58,9 @@ import jaxdse as jd  # noqa: E402
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 OSL = ROOT / "experiments" / "naspi_osl_case1" / "fleet.toml"
+JAXDSE = str(Path(sys.executable).parent / "jaxdse") if (Path(sys.executable).parent / "jaxdse").exists() \
+    else (shutil.which("jaxdse") or "jaxdse")
+"""The console script (``pip install jaxdse``), beside this Python where it is installed there."""
 NPCC = ROOT / "experiments" / "andes_bench" / "fleet_npcc.toml"
 CAPACITY_S = 45.0
 ONE_UNIT = {30: "1232_navajo", 60: "B50_G1"}
@@ -86,9 +89,8 @@ RESTARTING = (
 
 def serve(fleet: Path, *args: str) -> tuple[subprocess.Popen, int]:
     """``jaxdse pmu-sim FLEET --port 0 ARGS``; returns the process and its port."""
-    proc = subprocess.Popen([sys.executable, "-c", "from jaxdse._app.cli import entry; entry()", "pmu-sim",
-                             str(fleet), "--port", "0", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True)
+    proc = subprocess.Popen([JAXDSE, "pmu-sim", str(fleet), "--port", "0", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
     line = proc.stdout.readline()
     m = re.search(r":(\d+) ", line)
     if not m:
@@ -316,10 +318,10 @@ def part_faults(work):
                             "verdicts": verdicts(s["updates_list"]),
                             "identified_outside_batch_interval": len(wrong),
                             "identified_more_than_10_percent_off_dyr": off,
-                            "counts": {k: st.get(k, 0) for k in ("frames", "missing_frames", "late_or_repeated",
-                                                                 "off_grid", "config_changes", "disconnects",
-                                                                 "connect_failures")},
-                            "decoder_rejected": st.get("decoder_rejected", {}),
+                            "counts": {k: st.get(k, 0) for k in ("data_frames", "frames_used", "slots_without_frame",
+                                                                 "late_frames", "repeated_frames", "off_grid_frames",
+                                                                 "config_changes", "disconnects", "connect_failures")},
+                            "decoder": st.get("decoder", {}),
                             "unusable_samples": sum(st.get("unusable_samples", {}).values()),
                             "stale_samples": sum(st.get("stale_samples", {}).values()),
                             "restarts": max((u["segment"] for u in s["updates_list"]), default=0) - 1,
@@ -439,7 +441,7 @@ def report(doc) -> str:
                 lines.append(f"| {run['run']} | `{row['fault']}` | {row['what']} | {_f(row['H_median_before_s'])} | "
                              f"{_f(row['H_median_after_s'])} | {_f(row['first_estimate_after_fault_s'], '.1f')} |")
         lines += ["", "| run | updates | verdicts | identified, interval outside the batch interval | identified "
-                  "more than 10 % off the .dyr H | counts | decoder rejected | unusable / stale samples | restarts |",
+                  "more than 10 % off the .dyr H | counts | decoder | unusable / stale samples | restarts |",
                   "|---|---|---|---|---|---|---|---|---|"]
         for run in f["runs"]:
             off = run["identified_more_than_10_percent_off_dyr"]
@@ -447,7 +449,7 @@ def report(doc) -> str:
                          f"{run['identified_outside_batch_interval']} | {len(off)}"
                          + "".join(f" ({o['unit']} at {o['t_s']:.0f} s: {o['H_s']:.3f} s, .dyr {o['H_dyr_s']:.3f} s)"
                                    for o in off[:2])
-                         + f" | {run['counts']} | {run['decoder_rejected']} | {run['unusable_samples']} / "
+                         + f" | {run['counts']} | {run.get('decoder', run.get('decoder_rejected'))} | {run['unusable_samples']} / "
                          f"{run.get('stale_samples', 0)} | "
                          f"{run['restarts']} |")
         lines.append("")

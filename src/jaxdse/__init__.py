@@ -12,6 +12,8 @@ from ._app.demo import demo_scenarios as demo_scenarios
 from ._app.dyr_fleet import CalibrateOptions as CalibrateOptions
 from ._app.fleet import fleet as fleet
 from ._app.run import run_config as run_config
+from ._app.sources import load_monitor as load_monitor
+from ._app.sources import replay_recording as replay_recording
 from ._app.validate import parameter_specs as parameter_specs
 from ._app.validate import validate as validate
 from ._app.windows import WindowCriteria as WindowCriteria
@@ -146,7 +148,5 @@ from ._sim.simulate import Simulation as Simulation
 from ._sim.simulate import Truth as Truth
 from ._sim.simulate import simulate as simulate
 from ._stream.monitor import Monitor as Monitor
-from ._stream.monitor import load_monitor as load_monitor
-from ._stream.monitor import replay_recording as replay_recording
 from ._stream.online import OnlineGroup as OnlineGroup
 from ._stream.online import Update as Update

@@ -26,7 +26,8 @@ from jaxdse._io.errors import InputError
 from jaxdse._io.measurement import read_measurement
 from jaxdse._stream import c37118 as c3
 from jaxdse._stream import pmu_sim
-from jaxdse._stream.monitor import Monitor, load_monitor, replay_recording
+from jaxdse._app.sources import load_monitor, load_source, replay_recording
+from jaxdse._stream.monitor import Monitor
 from jaxdse._stream.online import OnlineGroup
 
 jax.config.update("jax_enable_x64", True)
@@ -92,6 +93,24 @@ def test_chunks_do_not_change_h(example):
         assert a[t].d_pu_s == pytest.approx(b[t].d_pu_s, rel=1e-8)
 
 
+def test_filling_says_how_far_along_and_what_for(example):
+    """Before its first chunk (nothing compiled yet): the stream time a unit's segment holds and
+    the stream time its first update needs, from the segment's first sample, and why."""
+    _, g, rec = example
+    grp = OnlineGroup([g.name], [g.plant], [rec.location], 25.0, WindowSettings(update_s=1.0, window_s=20.0))
+    have, need = grp.filling()
+    assert have[0] == 0 and need[0] == pytest.approx(grp.first_update_samples() / 25)
+    offset = 7                                             # the segment starts 7 frames before a chunk boundary
+    for k in range(100):
+        assert grp.push(BASE - offset + k, [rec.v_mag_pu[k]], [rec.v_ang_rad[k]], [rec.i_mag_pu[k]],
+                        [rec.i_ang_rad[k]], [rec.f_hz[k]], [True]) == []
+    have, need = grp.filling()
+    assert have[0] == pytest.approx(4.0) and need[0] == pytest.approx((offset + grp.first_update_samples()) / 25)
+    # 20 s window + 1 s lookahead after it + the halo, from the chunk boundary
+    assert grp.first_update_samples() == 20 * 25 + 25 + grp.halo
+    assert "a full 20 s window and the 1 s after it" in grp.wait_reason()
+
+
 def test_short_gaps_are_bridged_long_ones_restart(example):
     _, g, rec = example
     rec = _head(rec, 1750)                                     # 70 s
@@ -109,7 +128,7 @@ def test_short_gaps_are_bridged_long_ones_restart(example):
 
 def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     config, _, _ = example
-    source = pmu_sim.load_source(config)
+    source = load_source(config)
     faults = [pmu_sim.Fault.parse(s) for s in (
         "drop@20+0.4", "error@25+0.2", "crc@30+0.2", "late=0.05@35+0.2", "stale@40+0.2", "config-change=2@45", "drop@75+2")]
     server = pmu_sim.PmuServer(source, port=0, speed=30.0, faults=faults)
@@ -117,12 +136,40 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
         (tmp_path / "mon.toml").write_text(
             f'fleet = "{config}"\nupdate_s = 1.0\nwindow_s = 20.0\n[stream]\nhost = "{host}"\nport = {port}\n'
             "timeout_s = 2.0\n[alarm]\nh_below_s = 7.0\n")
-        mon = Monitor(load_monitor(tmp_path / "mon.toml"), tmp_path / "live", log=lambda line: None)
+        lines = []
+        mon = Monitor(load_monitor(tmp_path / "mon.toml"), tmp_path / "live", log=lines.append, progress_s=0.2)
         summary = mon.run(duration_s=8.0)
     live = [json.loads(x) for x in (tmp_path / "live" / "updates.jsonl").read_text().splitlines()]
     assert live and summary["updates"] == len(live)
     st = summary["streams"][0]
-    assert st["config_changes"] == 1 and st["missing_frames"] >= 50 + 10
+    assert st["config_changes"] == 1 and st["slots_without_frame"] >= 50 + 10
+    # Each counter counts what it is named for: every data frame is used, late, repeated, off the
+    # grid or beyond the reorder buffer (0.05 s late is within reorder_s: used); the decoder's
+    # count of frames it decoded is not among what it rejected (the 5 frames with a bad CRC).
+    assert st["data_frames"] == st["frames_used"] + st["late_frames"] + st["repeated_frames"] \
+        + st["off_grid_frames"] + st["reorder_overflow_frames"]
+    assert st["late_frames"] == st["repeated_frames"] == st["off_grid_frames"] == 0
+    rejected = {k: v for k, v in st["decoder"].items() if k.startswith("frames_rejected_")}
+    assert rejected.get("frames_rejected_crc") == server.stats["bad_crc"] == 5
+    assert st["data_frames"] + st["frames_before_config"] + sum(rejected.values()) == server.stats["sent"]
+    assert st["decoder"]["frames_decoded"] == st["data_frames"] + st["frames_before_config"] + 2   # + 2 CFG-2
+    # The delay, on the stream's clock (30x real time): never below what the estimate waits for by
+    # construction (its 1 s lookahead and the 0.2 s reorder buffer); the wall delay is it divided by
+    # the pace measured then (arrivals stamped by the reader thread, late while XLA compiles).
+    assert st["pace"] == pytest.approx(30.0, rel=0.2)
+    assert min(x["delay_s"] for x in live) >= 1.2 - 1e-6
+    assert all(20.0 < x["delay_s"] / x["wall_delay_s"] < 40.0 for x in live)
+    # While the window fills: lines that say how far along and what the first estimate needs.
+    # What it waited for: the compiler at the configuration, then (a line every 0.2 s while the
+    # window fills, where the stream's 4 s of wall time were not spent queued behind the compiler)
+    # the stream time the first estimate needs: from the first frame to the frame 1 s (the
+    # lookahead) after the first window's end, that frame included.
+    import re
+
+    assert any("compiling the estimators' programs" in x for x in lines), lines
+    filling = [x for x in lines if "filling their window" in x]
+    assert all("a full 20 s window" in x for x in filling), lines
+    needs = [float(re.search(r"of ([0-9.]+) s of stream time", x).group(1)) for x in filling[:1]]
     assert list(st["stale_samples"].values()) == [5]      # 40.0-40.16 s repeat the 39.96 s frame
     # The estimators restart at the configuration change (a new part of the recording) and at
     # the long gap (a new segment): each time, no update until the window is full again.
@@ -131,6 +178,8 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     parts = tomllib.loads((tmp_path / "live" / "replay.toml").read_text())["replay"]["part"]
     assert len(parts) == 2
     t0 = parts[0]["index0"] / 25.0                        # the first frame's time
+    for need in needs:
+        assert need == pytest.approx(live[0]["t"] + 1.0 + 1 / 25 - t0, abs=0.051)
     ts = np.array([x["t"] for x in live]) - t0
     assert not np.any((ts > 45.5) & (ts < 45 + 20)) and not np.any((ts > 75.5) & (ts < 77 + 20))
     assert {x["segment"] for x in live} == {1, 2}
@@ -188,13 +237,13 @@ def test_results_are_published_and_shown(example, tmp_path):
     import urllib.request
 
     config, _, _ = example
-    server = pmu_sim.PmuServer(pmu_sim.load_source(config), port=0, speed=20.0)
+    server = pmu_sim.PmuServer(load_source(config), port=0, speed=20.0)
     with server.serve_in_thread() as (host, port):
         (tmp_path / "mon.toml").write_text(
             f'fleet = "{config}"\nwindow_s = 20.0\n[stream]\nhost = "{host}"\nport = {port}\n'
             '[publish]\nport = 0\nidcode = 77\n[view]\nport = 0\n')
         mon = Monitor(load_monitor(tmp_path / "mon.toml"), tmp_path / "live", log=lambda line: None)
-        th = threading.Thread(target=mon.run, args=(8.0,), daemon=True)
+        th = threading.Thread(target=mon.run, args=(12.0,), daemon=True)   # the page read while it runs
         th.start()
         deadline = time.monotonic() + 10
         while (mon.publisher.bound is None) and time.monotonic() < deadline:
@@ -217,7 +266,7 @@ def test_results_are_published_and_shown(example, tmp_path):
     assert "<title>jaxdse monitor</title>" in page and "state.json" in page
     (u,) = state["units"]
     assert u["unit"] == "unit1" and u["history"] and u["latest"]["verdict"] == "identified"
-    assert state["streams"][0]["frames"] > 0
+    assert state["streams"][0]["frames_used"] > 0
     if dom is not None:
         assert 'data-unit="unit1"' in dom and ">identified<" in dom and "<svg" in dom, dom[-2000:]
     assert frames
@@ -234,7 +283,7 @@ def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     """Two streams (``tile = 2``: units unit1 and unit1~2, one per stream); the second stops
     after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on."""
     config, _, _ = example
-    source = pmu_sim.tile(pmu_sim.load_source(config), 2)
+    source = pmu_sim.tile(load_source(config), 2)
     a = pmu_sim.PmuServer(source, port=0, speed=20.0, loop=True)        # never ends by itself
     b = pmu_sim.PmuServer(source, port=0, speed=20.0, duration=2.0)
     with a.serve_in_thread() as (ha, pa), b.serve_in_thread() as (hb, pb):
@@ -249,3 +298,49 @@ def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     assert first and max(first) > max(second, default=0) + 10       # 20x: 10 s of stream time
     s0, s1 = summary["streams"]
     assert s0["disconnects"] == 0 and s1["disconnects"] + s1["connect_failures"] >= 1
+
+
+def test_stream_clock_measures_delay_in_stream_time():
+    """The same stream at 1x and 5x real time, the same processing: the delay in stream time is
+    the same (the window's wait, 1.2 s, plus the processing in stream time), the wall delay is it
+    divided by the pace; the wall clock's own offset from the stream does not enter."""
+    from jaxdse._stream.monitor import StreamClock
+
+    out = {}
+    for speed in (1.0, 5.0):
+        clock = StreamClock()
+        t0, w0 = 1_700_000_000.0, 500.0                  # stream time [s since 1970], monotonic [s]
+        assert clock.now(w0) is None and clock.pace is None
+        for k in range(251):                              # 10 s at 25 frames/s
+            clock.frame(t0 + k / 25, w0 + k / 25 / speed)
+        clock.frame(t0 + 3.0, w0 + 10.0 / speed)          # a late frame moves nothing
+        assert clock.pace == pytest.approx(speed, rel=1e-12)
+        processing = 0.002                                # [s of wall time] after the newest frame came
+        u_t = t0 + 10.0 - 1.2                             # the update's window ended 1.2 s of stream before
+        delay = clock.now(w0 + 10.0 / speed + processing) - u_t
+        out[speed] = delay, delay / clock.pace
+        clock.restart()                                   # a new connection: the last pace serves meanwhile
+        assert clock.pace == pytest.approx(speed) and clock.now(w0) is None
+    (d1, w1), (d5, w5) = out[1.0], out[5.0]
+    assert d1 == pytest.approx(1.2 + 0.002, abs=1e-6) and d5 == pytest.approx(1.2 + 5 * 0.002, abs=1e-6)
+    assert abs(d5 - d1) < 0.1 and w5 == pytest.approx(d5 / 5)
+
+
+def test_stream_layer_imports_no_app_and_readers_not_each_other():
+    """The house: the stream layer does not reach up into the application layer; the STTP
+    module does not import the monitor that uses it; the experiment uses the public API."""
+    import ast
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    stream = root / "src" / "jaxdse" / "_stream"
+    for path in stream.glob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom):
+                mod = "." * node.level + (node.module or "")
+                names = [a.name for a in node.names]
+                assert not mod.startswith(".._app") and "_app" not in mod.split("."), (path.name, mod)
+                if path.name == "sttp.py":
+                    assert mod not in (".monitor",) and not (mod == "." and "monitor" in names), mod
+    text = (root / "experiments" / "monitor" / "run.py").read_text()
+    assert "jaxdse._" not in text

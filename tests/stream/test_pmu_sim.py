@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from builders import example_cut
 
+from jaxdse._app.sources import load_source
 from jaxdse._stream import c37118 as c3
 from jaxdse._stream import pmu_sim
 
@@ -32,7 +33,7 @@ def recording(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def source(recording):
-    return pmu_sim.load_source(recording[0])
+    return load_source(recording[0])
 
 
 def _in_file(raw):
@@ -162,7 +163,7 @@ def test_every_fault_shows_as_the_standard_says(source):
 
 
 def test_a_fleets_plants_are_stations_of_one_concentrator():
-    src = pmu_sim.load_source(ROOT / "experiments" / "andes_bench" / "fleet_ieee14.toml")
+    src = load_source(ROOT / "experiments" / "andes_bench" / "fleet_ieee14.toml")
     assert [s.name for s in src.stations] == ["B1_G1", "B2_G1", "B3_G1", "B6_G1", "B8_G1"]
     assert src.rate == 60 and src.f_nominal_hz == 60 and src.stations[0].units == ("pu", "pu of 100 MVA")
     cfg = pmu_sim.stream_config(src, pmu_sim.Format.parse("int,rect"))

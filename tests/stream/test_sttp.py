@@ -30,7 +30,8 @@ from jaxdse._io.errors import InputError
 from jaxdse._stream import c37118 as c3
 from jaxdse._stream import pmu_sim
 from jaxdse._stream import sttp as js
-from jaxdse._stream.monitor import Monitor, load_monitor
+from jaxdse._app.sources import load_monitor, load_source
+from jaxdse._stream.monitor import Monitor
 
 jax.config.update("jax_enable_x64", True)
 
@@ -129,7 +130,7 @@ def test_reader_gives_the_recordings_frames(sttp_lib, example):
 
     from jaxdse._stream.monitor import StreamSpec
 
-    source = pmu_sim.load_source(example)
+    source = load_source(example)
     st = source.stations[0]
     q, stop, lines = queue.Queue(), threading.Event(), []
     server = js.SttpServer(source, port=0, speed=10.0)
@@ -211,7 +212,7 @@ def _subscribe(host, port, expression, got, errors):
 def test_monitor_reads_and_publishes_sttp(sttp_lib, example, tmp_path):
     """The example served over STTP at 20x; the monitor reads it (STTP in) and publishes its
     updates (STTP out); a subscriber of the published point tags gets updates.jsonl's values."""
-    source = pmu_sim.load_source(example)
+    source = load_source(example)
     server = js.SttpServer(source, port=0, speed=20.0)
     with server as (host, port):
         (tmp_path / "mon.toml").write_text(
@@ -239,8 +240,8 @@ def test_monitor_reads_and_publishes_sttp(sttp_lib, example, tmp_path):
     live = [json.loads(x) for x in (tmp_path / "live" / "updates.jsonl").read_text().splitlines()]
     summary = json.loads((tmp_path / "live" / "monitor.json").read_text())
     st = summary["streams"][0]
-    assert st["frames"] > 300 and st["off_grid"] == 0 and st["late_or_repeated"] == 0
-    assert not st["decoder_rejected"].get("points_off_grid") and not st["unusable_samples"]
+    assert st["data_frames"] > 300 and st["off_grid_frames"] == 0 and st["late_frames"] == st["repeated_frames"] == 0
+    assert not st["decoder"].get("points_off_grid") and not st["unusable_samples"]
     assert len(live) >= 5
     for x in live:
         assert x["verdict"] in ("identified", "weakly identified"), x

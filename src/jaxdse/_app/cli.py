@@ -384,10 +384,15 @@ excite H (ambient data) says "not excited" and gives no number; the last identif
 in the line with its age.
 
 --out DIR gets updates.jsonl (one line per unit and update: t [s since 1970, the window's last
-frame], unit, H_s, H_ci95, D, D_ci95, verdict, reasons, age_s, last_H_s, alarm, delay_s), the
-stream as the monitor used it (recording_*.csv) with replay.toml, and monitor.json (frames,
-drops, late frames, disconnects, the delay from a frame's timestamp to its estimate). `jaxdse
-run DIR/replay.toml` replays the recording through the file readers: the same estimates.
+frame], unit, H_s, H_ci95, D, D_ci95, verdict, reasons, age_s, last_H_s, alarm, delay_s,
+wall_delay_s), the stream as the monitor used it (recording_*.csv) with replay.toml, and
+monitor.json: per stream its counters (data frames, frames used, grid slots without a frame,
+late, repeated and off-grid frames, disconnects, the decoder's counts; "counters" says what
+each counts) and its pace (stream seconds per wall second), and the delay from a frame's
+timestamp to its estimate, measured on the stream's own clock in seconds of stream time (the
+same at any pmu-sim --speed) and in wall seconds. While a unit's window fills, a line every 5 s
+says how far along it is and what it waits for. `jaxdse run DIR/replay.toml` replays the
+recording through the file readers: the same estimates.
 
 Listens only for [publish] and [view], on 127.0.0.1 unless their host says otherwise. Exit
 status 0 after --duration or on Ctrl-C; 2 on bad input with a one-line message.
@@ -538,7 +543,7 @@ def _run(args) -> int:
     from .run import run_config
 
     if "replay" in read_toml(Path(args.config)):
-        from .._stream.monitor import replay_recording
+        from .sources import replay_recording
 
         out = Path(args.out) if args.out else Path(args.config).parent / "replayed"
         lines = replay_recording(args.config, out)
@@ -551,21 +556,35 @@ def _run(args) -> int:
 
 def _pmu_sim(args) -> int:
     from .._stream.pmu_sim import main as pmu_sim
+    from .sources import source_units
 
-    return pmu_sim(args)
+    return pmu_sim(args, source_units)
 
 
 def _monitor(args) -> int:
     from .._io.errors import InputError
-    from .._stream.monitor import Monitor, load_monitor
+    from .._stream.monitor import Monitor
+    from .sources import load_monitor
 
     _in_range("monitor", "--duration", args.duration, 0.0, None, "seconds > 0", low_open=True)
     summary = Monitor(load_monitor(args.config), Path(args.out) if args.out else None).run(args.duration)
-    d = summary["delay_s"]
     print(f"jaxdse monitor: {summary['updates']} update(s) in {summary['wall_s']:.0f} s"
-          + (f"; delay from frame to estimate: median {d['median']:.3f} s, 99 % {d['p99']:.3f} s" if d else ""),
-          file=sys.stderr)
+          + delay_words(summary), file=sys.stderr)
     return 0
+
+
+def delay_words(summary: dict) -> str:
+    """The monitor's delay from a frame to its estimate, in stream time (and in wall time where
+    the streams do not run in real time), for the closing line."""
+    d, w = summary.get("delay_s"), summary.get("wall_delay_s")
+    if not d:
+        return ""
+    text = f"; delay from frame to estimate: median {d['median']:.3f} s, 99 % {d['p99']:.3f} s of stream time"
+    paces = [s["pace"] for s in summary["streams"] if s.get("pace")]
+    if w and paces and any(abs(p - 1.0) > 0.01 for p in paces):
+        text += (f" (the stream at {', '.join(f'{p:.2f}' for p in paces)}x real time: median {w['median']:.3f} s, "
+                 f"99 % {w['p99']:.3f} s of wall time)")
+    return text
 
 
 def _demo(args) -> int:
@@ -696,7 +715,8 @@ def build_parser() -> argparse.ArgumentParser:
     mo.add_argument("--out", metavar="DIR", default=None,
                     help="folder for updates.jsonl, the recording and monitor.json (default: none)")
     mo.add_argument("--duration", type=float, default=None, metavar="S",
-                    help="stop cleanly after S seconds (default: run until Ctrl-C)")
+                    help="stop cleanly after S seconds, not counting the compilation of the estimators at a "
+                         "stream's configuration (default: run until Ctrl-C)")
     mo.set_defaults(func=_monitor)
     demo = sub.add_parser("demo", help="run the estimator on two built-in simulated recordings",
                           description=DEMO_HELP,

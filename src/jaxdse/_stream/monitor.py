@@ -49,15 +49,23 @@ from .._io.measurement import MAX_CURRENT_SAMPLE_PU_MACHINE, REPEATS_RARE, VOLTA
 from .._io.schema import no_unknown, read_toml, subtable, typed_value
 from . import c37118 as c3
 from .online import OnlineGroup, Update
-from .pmu_sim import PmuClient, _short_names, served_units, source_units
+from .pmu_sim import PmuClient, Units, served_units, short_names
+from .waits import Backoff, call, join, put
 
-MAX_BACKOFF_S = 10.0
 FREQUENCY_RANGE_HZ = 5.0
 """A frequency this far from nominal is no measurement (the readers' ``MAX_FREQUENCY_SAMPLE_OFFSET_HZ``)."""
 MAX_TIMINGS = 1_000_000
 """Per-frame processing times kept for the summary (a day at 60 frames/s is 5 million)."""
 MAX_PENDING_FRAMES = 4096
-"""Frames the reorder buffer holds at most (its ``reorder_s`` covers far fewer)."""
+"""Frames the reorder buffer holds at most (its ``reorder_s`` covers far fewer); also the used
+grid slots remembered to tell a repeated frame from a late one."""
+PROGRESS_S = 5.0
+"""While a unit's window fills (no estimate yet), a line every this many seconds [s, wall]."""
+READY_S = 600.0
+"""A reader waits at most this long [s] for the main thread to take a stream's configuration
+(and compile the estimators) before it turns data on."""
+QUEUE_SIZE = 100_000
+"""Items (frames, counts, connection events) waiting for the main thread."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -110,6 +118,8 @@ class MonitorConfig:
     """[publish] host, port, idcode of the virtual PMU (None: not published)."""
     view: dict | None = None
     """[view] host, port of the live web page (None: no page)."""
+    source_units: Units | None = None
+    """The units of ``source`` and the estimator's settings it gives (:class:`~.pmu_sim.Units`)."""
 
 
 STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
@@ -117,8 +127,15 @@ TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish
 PUBLISH_KEYS = {"protocol", "host", "port", "idcode"}
 
 
-def load_monitor(path) -> MonitorConfig:
-    """Read and check a monitor file (see ``MONITOR_HELP`` in the CLI)."""
+def load_monitor(path, units_of) -> MonitorConfig:
+    """Read and check a monitor file (see ``MONITOR_HELP`` in the CLI).
+
+    Arguments:
+        path: the monitor file.
+        units_of: ``units_of(source)`` gives the :class:`~.pmu_sim.Units` of the run
+            configuration or fleet file that the monitor file names (``fleet``); the
+            application layer passes ``jaxdse._app.sources.source_units`` (``jaxdse.load_monitor``
+            is this function with it)."""
     path = Path(path)
     data = read_toml(path)
     no_unknown(path, data, TOP_KEYS, "")
@@ -158,7 +175,8 @@ def load_monitor(path) -> MonitorConfig:
     tables = data.get("stream", [{}])
     if isinstance(tables, dict):
         tables = [tables]
-    runs, skipped = source_units(source)[:2]
+    est = units_of(source)
+    runs, skipped = est.runs, est.skipped
     tile = typed_value(path, int, data.get("tile", 1), "tile", 1)
     runs = tiled(runs, tile)
     names = [n for n, _ in runs]
@@ -209,7 +227,7 @@ def load_monitor(path) -> MonitorConfig:
                          typed_value(path, float, alarm["h_below_s"], "alarm.h_below_s", 0)
                          if "h_below_s" in alarm else None,
                          typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes,
-                         publish, view)
+                         publish, view, est)
 
 
 def tiled(runs: list, copies: int) -> list:
@@ -220,19 +238,39 @@ def tiled(runs: list, copies: int) -> list:
 
 # --- the connections -------------------------------------------------------------------------
 
-def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log):
-    """One stream's thread: connect, ask for the configuration, read; reconnect with back-off."""
-    backoff = 0.5
+def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log,
+            ready: threading.Event | None = None):
+    """One stream's thread: connect, ask for the configuration, read; reconnect with back-off.
+
+    Puts (k, kind, x, arrival) on ``out``: "frame" (a configuration or data frame), "up",
+    "down" and "refused" (text), "counts" (the decoder's counts); ``arrival``: time.monotonic()
+    when the frame's bytes came. Data is turned on once ``ready`` is set (the main thread has
+    taken the configuration and compiled the estimators: no backlog of frames behind the
+    compiler), or after ``READY_S``. Every wait ends: the connection's and each read's within
+    ``timeout_s``, a full queue (the main thread took nothing) within ``timeout_s`` too."""
+    backoff = Backoff()
+    consumer = "the monitor's main thread"
+
+    def send(kind, x, at=None):
+        put(out, (k, kind, x, time.monotonic() if at is None else at), spec.timeout_s, consumer)
+
     while not stop.is_set():
         up = False
         try:
             with PmuClient(spec.host, spec.port, spec.idcode, timeout=spec.timeout_s,
                            udp=spec.transport == "udp") as pmu:
-                out.put((k, "frame", pmu.config(c3.CFG2)))
+                send("frame", pmu.config(c3.CFG2))
+                deadline = time.monotonic() + READY_S
+                while ready is not None and not ready.wait(0.2) and not stop.is_set():
+                    if time.monotonic() > deadline:
+                        log(f"stream {k}: the estimators were not ready {READY_S:g} s after the configuration "
+                            "came; data turned on anyway")
+                        break
                 pmu.start()
-                out.put((k, "up", f"{spec.host}:{spec.port}"))
+                send("up", f"{spec.host}:{spec.port}")
                 up = True
-                backoff, last = 0.5, time.monotonic()
+                backoff.reset()
+                last = time.monotonic()
                 while not stop.is_set():
                     frames = pmu.poll(0.2)
                     now = time.monotonic()
@@ -242,8 +280,8 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
                         raise TimeoutError(f"no frame for {spec.timeout_s:g} s")
                     for frame in frames:
                         if isinstance(frame, (c3.ConfigFrame, c3.DataFrame)):
-                            out.put((k, "frame", frame))
-                    out.put((k, "counts", dict(pmu.decoder.counts)))
+                            send("frame", frame, now)
+                    send("counts", decoder_counts(pmu.decoder.counts))
                 try:
                     pmu.stop()
                 except OSError:
@@ -251,11 +289,24 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
         except (OSError, ConnectionError, TimeoutError) as err:
             if stop.is_set():
                 break
-            out.put((k, "down" if up else "refused", f"{err}"))
+            try:
+                send("down" if up else "refused", f"{err}")
+            except TimeoutError as full:
+                log(f"stream {k}: {full}")
             log(f"stream {k} ({spec.host}:{spec.port}): {err or type(err).__name__}; reconnecting in "
-                f"{backoff:g} s")
-            stop.wait(backoff)
-            backoff = min(2 * backoff, MAX_BACKOFF_S)
+                f"{backoff.s:g} s")
+            backoff.wait(stop)
+
+
+def decoder_counts(counts) -> dict:
+    """The C37.118 decoder's counts, each named for what it counts: ``frames_decoded`` (every
+    frame decoded: configuration, data, header, command), ``bytes_skipped`` (garbage before a
+    SYNC byte) and ``frames_rejected_<why>`` (crc, length, type, field, malformed, no_config:
+    :class:`~.c37118.FrameError`'s kinds; not used)."""
+    out = {"frames_decoded": int(counts.get("frames", 0)), "bytes_skipped": int(counts.get("skipped_bytes", 0))}
+    out.update({f"frames_rejected_{kind}": int(n) for kind, n in sorted(counts.items())
+                if kind not in ("frames", "skipped_bytes") and n})
+    return out
 
 
 # --- the units' estimators ---------------------------------------------------------------------
@@ -305,9 +356,105 @@ def _layout(cfg: c3.ConfigFrame):
 
 
 COLUMNS = ("VM", "VA", "IM", "IA", "F", "STAT")
-COUNTS = ("frames", "missing_frames", "late_or_repeated", "off_grid", "reorder_overflow", "before_config",
-          "config_changes", "disconnects", "connect_failures")
 """A unit's columns in a recording: |V| [pu], angle V [rad], |I| [pu], angle I [rad], f [Hz], STAT."""
+COUNTS = {
+    "data_frames": "data frames received with a configuration in force; each is then used, late, "
+                   "repeated, off the grid or beyond the reorder buffer",
+    "frames_used": "frames released to the estimators and the recording (one per grid slot)",
+    "slots_without_frame": "grid slots between used frames that no frame filled before they were released "
+                           "(dropped on the way, or later than reorder_s)",
+    "late_frames": "frames that came after their grid slot was released (not used; the slot is also in "
+                   "slots_without_frame)",
+    "repeated_frames": "frames for a grid slot already held or used (not used)",
+    "off_grid_frames": "frames whose timestamp is not on the reporting grid (not used)",
+    "reorder_overflow_frames": f"frames that found the reorder buffer full ({MAX_PENDING_FRAMES} frames; not used)",
+    "frames_before_config": "data frames before the stream's first configuration (not used)",
+    "config_changes": "new configurations (CFGCNT or layout changed): stations re-mapped, estimators restarted",
+    "disconnects": "connections that dropped or stayed silent timeout_s, and were made again",
+    "connect_failures": "connection attempts that failed",
+}
+"""A stream's counters in monitor.json and the live view, and what each counts."""
+DECODER_COUNTS = {
+    "frames_decoded": "C37.118: frames the decoder decoded (configuration, data, header, command)",
+    "bytes_skipped": "C37.118: bytes of garbage before a SYNC byte",
+    "frames_rejected_<why>": "C37.118: frames the decoder rejected, by why (crc, length, type, field, "
+                             "malformed, no_config); not used",
+    "unknown_points, points_off_grid, late_points": "STTP: measurements not used (not subscribed, "
+                                                     "timestamp off the grid, for a frame already released)",
+    "bad_quality_points": "STTP: measurements whose quality flags set a data error in their station's STAT",
+    "incomplete_frames": "STTP: frames released without every subscribed point",
+    "inbox_overflow": "STTP: packets of measurements lost (the reader's inbox was full)",
+}
+"""What each stream's ``decoder`` counts in monitor.json (summed over its connections)."""
+SUMMARY_KEYS = {
+    "delay_s": "per update, from the window's last frame's timestamp to the update, in seconds of stream "
+               "time (the stream's own clock, as its frames' timestamps and arrivals show it): the same at "
+               "any --speed",
+    "wall_delay_s": "the same delay in wall seconds (delay_s divided by the stream's pace)",
+    "monitor_s": "per emission of updates, wall seconds from the newest frame's arrival to it (the main "
+                 "thread's queue and processing): delay_s is the stream time from the window's end to the newest "
+                 "frame (the estimate's own wait: its lookahead and the reorder buffer) plus this times the pace",
+    "pace": "per stream, stream seconds per wall second (1 in real time; 5 for pmu-sim --speed 5)",
+    "processing_ms_per_frame": "the main thread's time per data frame, its updates included [ms]",
+}
+UNIT_COUNTS = {
+    "unusable_samples": "per unit, samples not used: STAT data error or lost sync, NaN, or a value outside "
+                        "the file readers' physical ranges",
+    "stale_samples": "per unit, usable samples not used because both phasors repeat the previous sample "
+                     "exactly (a PDC holding a lost PMU's last value)",
+}
+
+
+class StreamClock:
+    """A stream's own clock, as its frames show it: the delay of an estimate is measured on it,
+    in seconds of stream time, so that it means the same at any pace (``jaxdse pmu-sim --speed
+    5`` sends a recording five times faster than its timestamps advance; a PDC replaying an
+    archive may run slower or faster than real time).
+
+    At wall time w (``time.monotonic()``) the stream's time is that of the newest frame
+    received, t_n, plus the wall time since it arrived, w_n, at the stream's pace r (stream
+    seconds per wall second, from the first frame of the connection to the newest):
+    ``now(w) = t_n + (w - w_n) r``. The delay of an update for the window that ends at t is
+    ``now(w) - t`` [s of stream time]; divided by r, the wall seconds it took. Neither needs
+    the monitor's clock to agree with the stream's (a frame's transport from the PMU is not in
+    it: at real time and with a synchronised clock, ``time.time() - t`` at a frame's arrival is
+    that latency)."""
+
+    MIN_SPAN_S = 0.1
+    """Wall time from the first frame [s] before the pace is measured (1 until then)."""
+
+    def __init__(self):
+        self.first = self.newest = None
+        self.pace_before = None
+
+    def restart(self):
+        """A new connection: the pace is measured again (the last one serves meanwhile)."""
+        self.pace_before = self.pace or self.pace_before
+        self.first = self.newest = None
+
+    def frame(self, t: float, arrival: float):
+        """A data frame stamped ``t`` [s since 1970] that arrived at ``arrival`` [monotonic s]."""
+        if self.first is None:
+            self.first = (t, arrival)
+        if self.newest is None or t > self.newest[0]:
+            self.newest = (t, arrival)
+
+    @property
+    def pace(self) -> float | None:
+        """Stream seconds per wall second (None: not measured yet)."""
+        if self.first is None or self.newest[1] - self.first[1] < self.MIN_SPAN_S:
+            return self.pace_before
+        return (self.newest[0] - self.first[0]) / (self.newest[1] - self.first[1])
+
+    def since_newest(self, wall: float) -> float | None:
+        """Wall seconds from the newest frame's arrival to ``wall`` (None: no frame yet)."""
+        return None if self.newest is None else wall - self.newest[1]
+
+    def now(self, wall: float) -> float | None:
+        """The stream's time [s since 1970] at ``wall`` [monotonic s] (None: no frame yet)."""
+        if self.newest is None:
+            return None
+        return self.newest[0] + (wall - self.newest[1]) * (self.pace or 1.0)
 
 
 class _Stream:
@@ -317,7 +464,7 @@ class _Stream:
                  cfg: MonitorConfig, est, out_dir: Path | None, log):
         self.k, self.spec, self.units, self.cfg, self.est, self.log = k, spec, units, cfg, est, log
         self.out_dir = out_dir
-        short = dict(zip(all_names, _short_names(all_names)))
+        short = dict(zip(all_names, short_names(all_names)))
         named = dict(spec.stations)
         self.wanted = [(named.get(u.name), u.name, short[u.name]) for u in units]
         scale = [served_units(u.run.measurement)[:2] for u in units]
@@ -330,13 +477,18 @@ class _Stream:
         self.groups = []
         self.pos = np.full(len(units), -1)
         self.heap, self.held = [], set()
+        self.used_recent, self.used_order = set(), []
         self.released = None
         self.newest = None
         self.parts = []
         self.file = None
         # every key from the start: the live view's thread copies the dict while this one counts
-        self.counts = defaultdict(int, {k: 0 for k in COUNTS})
-        self.decoder_counts = {}
+        self.counts = defaultdict(int, dict.fromkeys(COUNTS, 0))
+        self.decoder_done = defaultdict(int)   # the reader's counts of the connections before this one
+        self.decoder_now = {}                  # ... and of this one
+        self.clock = StreamClock()
+        self.ready = threading.Event()          # the configuration taken, the estimators compiled
+        self.compile_s = 0.0                    # [s] the main thread spent compiling them
         self.unusable = np.zeros(len(units), np.int64)
         self.stale = np.zeros(len(units), np.int64)
         self._forget_samples()
@@ -368,7 +520,17 @@ class _Stream:
         self.rate = frame.rate_hz
         self.reorder = max(0, math.ceil(self.spec.reorder_s * self.rate - 1e-9))
         self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream")
+        t0 = time.perf_counter()
+        self.log(f"stream {self.k}: compiling the estimators' programs ({len(self.groups)} group(s): up to a "
+                 "minute the first time, seconds from the compilation cache; data is turned on once they are "
+                 "ready)")
+        for group, _ in self.groups:      # the compiler now, while the window fills
+            group.warm_up()
+        self.compile_s += time.perf_counter() - t0
+        self.log(f"stream {self.k}: the estimators' programs ready ({len(self.groups)} group(s), "
+                 f"{time.perf_counter() - t0:.1f} s)")
         self.heap, self.held, self.released, self.newest = [], set(), None, None
+        self.used_recent, self.used_order = set(), []
         self._new_part()
         mapped = int((self.pos >= 0).sum())
         if old is None:
@@ -382,6 +544,36 @@ class _Stream:
         if missing:
             self.log(f"stream {self.k}: no station for {', '.join(missing)} (not estimated)")
         return out
+
+    def decoder(self) -> dict:
+        """The reader's counts over every connection so far (:data:`DECODER_COUNTS`)."""
+        out = defaultdict(int, self.decoder_done)
+        for name, n in self.decoder_now.items():
+            out[name] += n
+        return {name: int(n) for name, n in sorted(out.items()) if n}
+
+    def progress(self) -> str | None:
+        """What the stream's units wait for, while some have no estimate in their segment yet
+        (None when every mapped unit has one)."""
+        where = f"{self.spec.host}:{self.spec.port}"
+        if self.config is None:
+            fails = self.counts["connect_failures"]
+            return (f"waiting for the configuration from {where}"
+                    + (f" ({fails} failed connection attempt(s))" if fails else ""))
+        if self.released is None and not self.heap:
+            return f"connected to {where}; waiting for data frames"
+        have, need, reason = [], [], None
+        for group, members in self.groups:
+            h, n = group.filling()
+            mapped = self.pos[members] >= 0
+            have += list(h[mapped & np.isfinite(n)])
+            need += list(n[mapped & np.isfinite(n)])
+            reason = reason or group.wait_reason()
+        if not need:
+            return None
+        mapped = int((self.pos >= 0).sum())
+        return (f"{len(need)} of {mapped} unit(s) filling their window: {min(have):.1f} of {max(need):.1f} s of "
+                f"stream time (the first estimate needs {reason})")
 
     def _new_part(self):
         self.close()
@@ -397,18 +589,21 @@ class _Stream:
     # data
     def on_data(self, frame: c3.DataFrame) -> list[Update]:
         if self.config is None:
-            self.counts["before_config"] += 1
+            self.counts["frames_before_config"] += 1
             return []
-        self.counts["frames"] += 1
+        self.counts["data_frames"] += 1
         idx = c3.grid_index(frame.soc, frame.fracsec, self.config.time_base, self.config.data_rate)
         if idx is None:
-            self.counts["off_grid"] += 1
+            self.counts["off_grid_frames"] += 1
             return []
-        if (self.released is not None and idx <= self.released) or idx in self.held:
-            self.counts["late_or_repeated"] += 1
+        if idx in self.held or idx in self.used_recent:
+            self.counts["repeated_frames"] += 1
+            return []
+        if self.released is not None and idx <= self.released:
+            self.counts["late_frames"] += 1
             return []
         if len(self.held) >= MAX_PENDING_FRAMES:
-            self.counts["reorder_overflow"] += 1
+            self.counts["reorder_overflow_frames"] += 1
             return []
         import heapq
 
@@ -425,8 +620,15 @@ class _Stream:
             idx, _, frame = heapq.heappop(self.heap)
             self.held.discard(idx)
             if self.released is not None and idx > self.released + 1:
-                self.counts["missing_frames"] += idx - self.released - 1
+                self.counts["slots_without_frame"] += idx - self.released - 1
             self.released = idx
+            self.counts["frames_used"] += 1
+            self.used_recent.add(idx)
+            self.used_order.append(idx)
+            if len(self.used_order) > 2 * MAX_PENDING_FRAMES:     # the last MAX_PENDING_FRAMES kept
+                for old in self.used_order[:-MAX_PENDING_FRAMES]:
+                    self.used_recent.discard(old)
+                del self.used_order[:-MAX_PENDING_FRAMES]
             out += self._use(idx, frame)
         return out
 
@@ -486,34 +688,47 @@ class _Stream:
             self.file = None
 
 
-def update_line(u: Update, alarm: bool, delay_s: float | None = None) -> dict:
-    """One line of ``updates.jsonl``."""
+def update_line(u: Update, alarm: bool, delay_s: float | None = None, wall_delay_s: float | None = None) -> dict:
+    """One line of ``updates.jsonl``; ``delay_s``: from the window's last frame to this update,
+    in seconds of stream time (:class:`StreamClock`); ``wall_delay_s``: the same in wall seconds."""
     line = {"t": u.t, "unit": u.unit, "H_s": u.h_s, "H_ci95": u.h_ci95, "D": u.d_pu_s, "D_ci95": u.d_ci95,
             "verdict": u.verdict, "reasons": list(u.reasons), "age_s": u.age_s, "last_H_s": u.last_h_s,
             "segment": u.segment, "window_s": u.window_s, "samples": u.samples, "alarm": alarm}
     if delay_s is not None:
         line["delay_s"] = round(delay_s, 6)
+    if wall_delay_s is not None:
+        line["wall_delay_s"] = round(wall_delay_s, 6)
     return line
 
 
 class Monitor:
-    """The monitor of :func:`load_monitor`'s configuration (see the module docstring)."""
+    """The monitor of :func:`load_monitor`'s configuration (see the module docstring).
 
-    def __init__(self, cfg: MonitorConfig, out_dir: Path | None = None, log=None, console=None):
+    ``progress_s``: while a unit's window fills, a line every this many wall seconds saying how
+    far along it is and what its first estimate waits for."""
+
+    def __init__(self, cfg: MonitorConfig, out_dir: Path | None = None, log=None, console=None,
+                 progress_s: float = PROGRESS_S):
+        if cfg.source_units is None:
+            raise ValueError("MonitorConfig without its source_units: read the monitor file with "
+                             "jaxdse.load_monitor")
         self.cfg = cfg
         self.out_dir = None if out_dir is None else Path(out_dir)
         if self.out_dir is not None:
             self.out_dir.mkdir(parents=True, exist_ok=True)
         self.log = log or (lambda line: print(f"jaxdse monitor: {line}", file=sys.stderr, flush=True))
         self.console = console
-        self.est = source_units(cfg.source)
+        self.progress_s = progress_s
+        self.est = cfg.source_units
         names = [u.name for u in cfg.units]
         self.streams = [_Stream(k, spec, [u for u in cfg.units if u.stream == k], names, cfg, self.est,
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
         self.alarms = {}
         self.updates = 0
         self.latest = {}
-        self.delays = []
+        self.delays = []         # [s of stream time] per update, from the window's last frame
+        self.wall_delays = []    # the same [s of wall time]
+        self.monitor_s = []      # [s of wall time] per emission, from the newest frame's arrival to it
         self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
         self._next_report = None
         self.publisher = None
@@ -534,18 +749,29 @@ class Monitor:
             self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view)
         self.processing = []     # seconds of the main thread per data frame (updates included)
 
-    def emit(self, updates: list[Update], timed: bool = True):
-        """Log, record, publish and show ``updates``; ``timed``: count their delay (not for the
+    def emit(self, updates: list[Update], stream: _Stream | None = None, timed: bool = True):
+        """Log, record, publish and show ``updates`` of ``stream``; their delay is measured on the
+        stream's clock (:class:`StreamClock`); ``timed``: count it in the summary (not for the
         last frames flushed at the stop, which waited for it)."""
-        now = time.time()
+        now = pace = None
+        if stream is not None and updates:
+            w = time.monotonic()
+            now = stream.clock.now(w)
+            pace = stream.clock.pace or 1.0
+            if now is not None and timed:
+                self.monitor_s.append(stream.clock.since_newest(w))
         for u in updates:
             alarm = self._alarm(u)
-            delay = now - u.t
-            if timed:
-                self.delays.append(delay)
+            delay = wall = None
+            if now is not None:
+                delay = now - u.t
+                wall = delay / pace
+                if timed:
+                    self.delays.append(delay)
+                    self.wall_delays.append(wall)
             self.updates += 1
             self.latest[u.unit] = u
-            line = update_line(u, alarm, delay)
+            line = update_line(u, alarm, delay, wall)
             if self._jsonl is not None:
                 self._jsonl.write(json.dumps(line) + "\n")
             if self.view is not None:
@@ -585,22 +811,35 @@ class Monitor:
         for u in self.latest.values():
             words[u.verdict] += 1
         hs = [u.h_s for u in self.latest.values() if u.h_s is not None]
-        dropped = sum(s.counts["missing_frames"] + s.counts["late_or_repeated"] for s in self.streams)
+        slots = sum(s.counts["slots_without_frame"] for s in self.streams)
+        late = sum(s.counts["late_frames"] for s in self.streams)
+        recent = self.delays[-100:]
         line = (f"{_utc(t)}: {len(self.latest)} unit(s): " + ", ".join(f"{k} {v}" for k, v in sorted(words.items()))
-                + (f"; median H {np.median(hs):.3g} s" if hs else "") + f"; frames missing or late {dropped}")
+                + (f"; median H {np.median(hs):.3g} s" if hs else "")
+                + (f"; delay {np.median(recent):.2f} s of stream time" if recent else "")
+                + f"; grid slots without a frame {slots}" + (f" ({late} frame(s) came late)" if late else ""))
         (self.console or self.log)(line)
 
+    def _progress(self):
+        """While a stream's units wait for their first estimate: a line per stream, how far
+        along they are and what they wait for."""
+        for s in self.streams:
+            line = s.progress()
+            if line:
+                self.log(f"stream {s.k}: {line}")
+
     def run(self, duration_s: float | None = None) -> dict:
-        """Monitor until ``duration_s`` seconds pass (None: until interrupted); returns the summary."""
-        q: queue.Queue = queue.Queue(maxsize=100_000)
+        """Monitor until ``duration_s`` seconds pass, not counting the compilation of the
+        estimators at a stream's configuration (None: until interrupted); returns the summary."""
+        q: queue.Queue = queue.Queue(maxsize=QUEUE_SIZE)
         stop = threading.Event()
         threads = []
         for k, s in enumerate(self.streams):
-            target, args = _reader, (k, s.spec, q, stop, self.log)
+            target, args = _reader, (k, s.spec, q, stop, self.log, s.ready)
             if s.spec.protocol == "sttp":
                 from .sttp import reader as target
 
-                args += ([given or full for given, full, _ in s.wanted],)
+                args = args[:5] + ([given or full for given, full, _ in s.wanted],)
             threads.append(threading.Thread(target=target, args=args, daemon=True, name=f"jaxdse-stream-{k}"))
         for t in threads:
             t.start()
@@ -615,75 +854,97 @@ class Monitor:
                 self.log(f"publishing on tcp {host}:{port} (IDCODE {self.publisher.idcode}, one station per "
                          "unit)")
         t0 = time.monotonic()
+        next_progress = t0 + self.progress_s
         try:
-            while duration_s is None or time.monotonic() - t0 < duration_s:
+            while duration_s is None or time.monotonic() - t0 - sum(s.compile_s for s in self.streams) < duration_s:
                 try:
-                    item = q.get(timeout=0.05)
+                    self._handle(q.get(timeout=0.05))
                 except queue.Empty:
-                    continue
-                self._handle(item)
+                    pass
+                if time.monotonic() >= next_progress:
+                    self._progress()
+                    next_progress = time.monotonic() + self.progress_s
         except KeyboardInterrupt:
             self.log("interrupted")
         finally:
             stop.set()
-            for t in threads:
-                t.join(timeout=2.0)
+            for s, t in zip(self.streams, threads):    # a reader's longest step: a connection or read, then a put
+                join(t, 2.0 * s.spec.timeout_s + 1.0, f"reading stream {s.k} from {s.spec.host}:{s.spec.port}",
+                     self.log)
             while True:    # what was received before the stop is used and recorded
                 try:
                     self._handle(q.get_nowait())
                 except queue.Empty:
                     break
             for s in self.streams:
-                self.emit(s.release(everything=True), timed=False)
+                self.emit(s.release(everything=True), s, timed=False)
                 s.close()
             if self._jsonl is not None:
                 self._jsonl.close()
             if self.publisher is not None:
                 self.publisher.stop()
             if self.view is not None:
-                self.view.stop()
+                call(self.view.stop, 5.0, "stopping the live view's web server", self.log)
         return self._finish(time.monotonic() - t0)
 
     def _handle(self, item):
-        k, kind, x = item
+        k, kind, x, arrival = item
         s = self.streams[k]
         if kind == "frame":
             t0 = time.perf_counter()
-            self.emit(s.on_config(x) if isinstance(x, c3.ConfigFrame) else s.on_data(x))
+            if isinstance(x, c3.ConfigFrame):
+                self.emit(s.on_config(x), s)
+                s.ready.set()
+            else:
+                if s.config is not None:
+                    s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
+                self.emit(s.on_data(x), s)
             if isinstance(x, c3.DataFrame) and len(self.processing) < MAX_TIMINGS:
                 self.processing.append(time.perf_counter() - t0)
         elif kind == "counts":
-            s.decoder_counts = x
+            s.decoder_now = x
         elif kind == "down":
             s.counts["disconnects"] += 1
         elif kind == "refused":
             s.counts["connect_failures"] += 1
-        elif kind == "up" and s.counts["disconnects"] + s.counts["connect_failures"]:
-            self.log(f"stream {k}: reconnected to {x}")
+        elif kind == "up":
+            for name, n in s.decoder_now.items():       # the last connection's counts, kept
+                s.decoder_done[name] += n
+            s.decoder_now = {}
+            s.clock.restart()
+            if s.counts["disconnects"] + s.counts["connect_failures"]:
+                self.log(f"stream {k}: reconnected to {x}")
+
+    def _delays(self, recent: int | None = None) -> dict:
+        """The delays from a frame's timestamp to its estimate: in stream time and in wall time."""
+        out = {}
+        for key, d in (("delay_s", self.delays), ("wall_delay_s", self.wall_delays),
+                       ("monitor_s", self.monitor_s)):
+            d = np.asarray(d if recent is None else d[-recent:])
+            out[key] = None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99)),
+                                                 "max": float(d.max())}
+        return out
 
     def _status(self) -> dict:
         """The streams' counts and the recent delay, for the live view (its thread)."""
-        recent = np.asarray(self.delays[-2000:])
-        return {"streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts)}
-                            for s in self.streams],
-                "delay_s": None if recent.size == 0 else {"median": float(np.median(recent)),
-                                                          "p99": float(np.quantile(recent, 0.99))}}
+        return {"streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, "pace": s.clock.pace,
+                             **dict(s.counts)} for s in self.streams],
+                **self._delays(recent=2000)}
 
     def _finish(self, wall_s: float) -> dict:
-        d = np.asarray(self.delays)
         summary = {
             "wall_s": round(wall_s, 3), "updates": self.updates,
-            "delay_s": None if d.size == 0 else {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99)),
-                                                 "max": float(d.max())},
+            **self._delays(),
             "processing_ms_per_frame": _percentiles(1e3 * np.asarray(self.processing)),
-            "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, **dict(s.counts),
-                         "decoder_rejected": {k: v for k, v in s.decoder_counts.items() if v},
+            "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, "pace": s.clock.pace,
+                         **dict(s.counts), "decoder": s.decoder(),
                          "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n},
                          "stale_samples": {u.name: int(n) for u, n in zip(s.units, s.stale) if n}}
                         for s in self.streams],
             "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
             "notes": list(self.cfg.notes),
+            "counters": {**SUMMARY_KEYS, **COUNTS, **UNIT_COUNTS, "decoder": DECODER_COUNTS},
         }
         if self.out_dir is not None:
             parts = [p for s in self.streams for p in s.parts if p["index0"] is not None]
@@ -717,16 +978,17 @@ def replay_toml(cfg: MonitorConfig, parts: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def replay_recording(path, out_dir: Path | None = None, log=None) -> list[dict]:
+def replay_recording(path, units_of, out_dir: Path | None = None, log=None) -> list[dict]:
     """``jaxdse run REPLAY.toml``: the recorded stream through the file readers and the same
-    windowed identification; writes ``updates.jsonl`` to ``out_dir`` and returns its lines."""
+    windowed identification; writes ``updates.jsonl`` to ``out_dir`` and returns its lines.
+    ``units_of``: as for :func:`load_monitor`."""
     from .._io.measurement import read_measurement
 
     path = Path(path)
     data = read_toml(path)
     rp = subtable(path, data, "replay", "replay")
-    cfg = load_monitor(Path(rp["monitor"]))
-    est = source_units(cfg.source)
+    cfg = load_monitor(Path(rp["monitor"]), units_of)
+    est = cfg.source_units
     by_name = {u.name: u for u in cfg.units}
     lines = []
     for k, part in enumerate(rp.get("part", [])):

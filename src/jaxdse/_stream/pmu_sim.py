@@ -59,6 +59,7 @@ from typing import NamedTuple
 import numpy as np
 
 from . import c37118 as c3
+from .waits import join
 
 MAX_CLIENTS = 16
 SEND_BUFFER_BYTES = 1 << 20
@@ -129,8 +130,27 @@ def served_units(spec) -> tuple[float, float, str, str]:
     return 1.0, 1.0, "pu", f"pu of {spec.s_base_mva:g} MVA"
 
 
-def load_source(path) -> Source:
+class Units(NamedTuple):
+    """The units of a run configuration or a fleet file, with the estimator's settings it gives
+    (read by the application layer, ``jaxdse._app.sources.source_units``)."""
+
+    runs: list
+    """(name, :class:`~jaxdse._io.config.GeneratorRun`) per unit."""
+    skipped: list
+    """(name, reason) of a fleet's plants left out."""
+    observer: object
+    settings: object
+    identify: object
+    verdict: object
+
+
+def load_source(path, units: Units) -> Source:
     """Read the recording(s) of a run configuration or a fleet file with jaxdse's readers.
+
+    Arguments:
+        path: the run configuration or fleet file (named in messages).
+        units: its units (:class:`Units`, as ``jaxdse._app.sources.source_units`` reads them:
+            the application layer resolves a fleet file, this layer only serves it).
 
     A unit whose recording cannot be conditioned is left out with a note when others remain
     (as ``jaxdse fleet`` does); with none left, the first error is raised (InputError)."""
@@ -139,7 +159,7 @@ def load_source(path) -> Source:
     from .._io.readers import load_table
 
     path = Path(path)
-    runs, skipped = source_units(path)[:2]
+    runs, skipped = units.runs, units.skipped
     notes = [f"{name}: not served ({reason})" for name, reason in skipped]
     parts, first_error = [], None
     for name, spec, machine in ((name, g.measurement, g.plant.machine) for name, g in runs):
@@ -205,39 +225,6 @@ def load_source(path) -> Source:
     return Source(path, stations, rate, lo, fnom, notes)
 
 
-class Units(NamedTuple):
-    """The units of a run configuration or a fleet file (:func:`source_units`)."""
-
-    runs: list
-    """(name, :class:`~jaxdse._io.config.GeneratorRun`) per unit."""
-    skipped: list
-    """(name, reason) of a fleet's plants left out."""
-    observer: object
-    settings: object
-    identify: object
-    verdict: object
-
-
-def source_units(path) -> Units:
-    """The units of a run configuration (its [[generator]]s) or a fleet file (its plants),
-    with the estimator's settings it gives."""
-    from .._core.identify import IdentifySettings
-    from .._io.schema import read_toml
-
-    path = Path(path)
-    if "case" in read_toml(path):
-        from .._app.fleet_file import load_fleet
-
-        fleet = load_fleet(path)
-        return Units([(p.name, p.run) for p in fleet.plants], [(s["name"], s["reason"]) for s in fleet.skipped],
-                     fleet.observer, fleet.settings, fleet.identify or IdentifySettings(), fleet.verdict)
-    from .._io.config import load_config
-
-    cfg = load_config(path)
-    return Units([(g.name, g) for g in cfg.generators], [], cfg.observer, cfg.settings,
-                 cfg.identify or IdentifySettings(), cfg.verdict)
-
-
 def _first_time(table, spec, quality) -> float:
     """The recording's first time [s since 1970]: its first ISO timestamp (UTC where it names no
     zone), or the smallest number of its time column read as seconds since 1970."""
@@ -298,7 +285,7 @@ def stream_config(source: Source, fmt: Format, *, idcode: int = 1, cfgcnt: int =
                   time_base: int = c3.DEFAULT_TIME_BASE, kind: int = c3.CFG2) -> c3.ConfigFrame:
     """The configuration of the served stream: one station per unit, ``V1`` and ``I1``."""
     stations = []
-    short = _short_names([s.name for s in source.stations])
+    short = short_names([s.name for s in source.stations])
     for k, st in enumerate(source.stations):
         sid = idcode if len(source.stations) == 1 else (idcode + k) % 65534 + 1
         scales = [_scale(st.v), _scale(st.i)]
@@ -317,7 +304,7 @@ def _scale(z) -> float:
     return max(1, math.ceil(top * INT_HEADROOM / 32767 * 1e5)) * 1e-5
 
 
-def _short_names(names) -> list[str]:
+def short_names(names) -> list[str]:
     """CFG-1/2 station names: 16 bytes; distinct where the long names' first 16 are not."""
     out, seen = [], set()
     for k, name in enumerate(names):
@@ -808,7 +795,7 @@ class PmuServer:
             yield self.bound
         finally:
             self.stop()
-            thread.join(timeout)
+            join(thread, timeout, f"serving {self.source.path.name} on {self.host}:{self.port}", self.log)
         if "error" in result:
             raise result["error"]
 
@@ -954,8 +941,9 @@ class PmuClient:
 
 # --- the command line ----------------------------------------------------------------------------
 
-def main(args, stream=None) -> int:
-    """``jaxdse pmu-sim``: see ``PMU_SIM_HELP`` in the CLI."""
+def main(args, units_of, stream=None) -> int:
+    """``jaxdse pmu-sim``: see ``PMU_SIM_HELP`` in the CLI; ``units_of(path)``: the
+    :class:`Units` of a run configuration or fleet file (passed in by the CLI)."""
     stream = stream or sys.stderr
 
     def log(line):
@@ -978,7 +966,7 @@ def main(args, stream=None) -> int:
              or (math.isfinite(args.duration) and args.duration > 0), "seconds > 0")):
         if not ok:
             raise InputError("pmu-sim", f"{name} {value}: out of range; give {what}")
-    source = load_source(args.recording)
+    source = load_source(args.recording, units_of(args.recording))
     if len(source.stations) * args.tile * MIN_STATION_BYTES > c3.MAX_FRAME:
         raise InputError("pmu-sim", f"--tile {args.tile}: {len(source.stations) * args.tile} stations "
                          f"cannot fit one data frame (at least {MIN_STATION_BYTES} bytes each, "

@@ -26,7 +26,8 @@ import numpy as np
 
 from . import c37118 as c3
 from .online import Update
-from .pmu_sim import SEND_BUFFER_BYTES, _short_names, serve_client
+from .pmu_sim import SEND_BUFFER_BYTES, serve_client, short_names
+from .waits import join
 
 ANALOGS = ("H", "H_LO", "H_HI", "D", "AGE")
 ALARM_TRIGGER_REASON = 8
@@ -50,7 +51,7 @@ class Publisher:
         self.log = log or (lambda line: None)
         rate = 1.0 / update_s
         data_rate = round(rate) if rate >= 1 else -round(update_s)
-        short = _short_names(self.units)
+        short = short_names(self.units)
         self.stations = tuple(c3.StationConfig(
             short[k], (idcode + k) % 65534 + 1, (), tuple(c3.AnalogChannel(a, 1) for a in ANALOGS),
             polar=True, phasor_float=True, analog_float=True, freq_float=True, fnom_hz=f_nominal_hz)
@@ -76,7 +77,7 @@ class Publisher:
     def stop(self):
         if self._loop is not None:
             self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(timeout=5.0)
+        join(self._thread, 5.0, f"serving the results on {self.host}:{self.port}", self.log)
 
     def _main(self):
         loop = asyncio.new_event_loop()

@@ -69,6 +69,7 @@ import numpy as np
 from .._io.errors import InputError
 from . import c37118 as c3
 from .publish import published_values
+from .waits import Backoff, join, put
 
 DEFAULT_PORT = 7165
 """The input's default port (a [[stream]] with protocol = "sttp" and no port)."""
@@ -257,8 +258,9 @@ class _Listener:
             try:
                 self.queue.put(None, timeout=2.0)
             except queue.Full:
-                pass
-            self._sender.join(timeout=5.0)
+                self.log("STTP publish: the sending thread took no update for 2 s (a subscriber that "
+                         "does not read?)")
+            join(self._sender, 5.0, "sending the queued updates to the subscribers", self.log)
         dp = self.pub._datapublisher
         if self.sock is not None:
             dp._started, dp._shuttingdown = False, True     # the accepting thread ends ...
@@ -385,7 +387,7 @@ class SttpServer:
 
     def stop(self):
         self._stop.set()
-        self._thread.join(timeout=5.0)
+        join(self._thread, 5.0, "serving the recording's frames", self.log)
         self._listener.stop()
 
     def __enter__(self):
@@ -567,34 +569,43 @@ def mapping(records, stations: list[str], rate_hz: float):
 
 def reader(k: int, spec, out: queue.Queue, stop: threading.Event, log, stations: list[str]):
     """One STTP stream's thread (the C37.118 reader's contract): puts (k, "frame", ConfigFrame
-    or DataFrame), (k, "up" / "down" / "refused", text) and (k, "counts", dict) on ``out``;
+    or DataFrame, arrival), (k, "up" / "down" / "refused", text, arrival) and (k, "counts",
+    dict, arrival) on ``out`` (``arrival``: ``time.monotonic()`` when the frame was complete);
     ``stations``: the station names to subscribe to."""
-    from .monitor import MAX_BACKOFF_S
-
-    backoff = 0.5
+    backoff = Backoff()
     state = {"cfgcnt": -1, "layout": None}
     while not stop.is_set():
         session = _Session(k, spec, out, stations, state)
         try:
             session.run(stop)
         except _Resubscribe:
-            session.close()
+            _close(session, log)
             log(f"stream {k} (STTP {spec.host}:{spec.port}): the publisher's configuration changed; "
                 "connecting again")
             continue
         except (OSError, ConnectionError, TimeoutError, ValueError) as err:
-            session.close()
+            _close(session, log)
             if stop.is_set():
                 break
-            out.put((k, "down" if session.up else "refused", f"{err}"))
-            log(f"stream {k} (STTP {spec.host}:{spec.port}): {err or type(err).__name__}; reconnecting in "
-                f"{backoff:g} s")
+            try:
+                session.put("down" if session.up else "refused", f"{err}")
+            except TimeoutError as full:
+                log(f"stream {k}: {full}")
             if session.up:
-                backoff = 0.5
-            stop.wait(backoff)
-            backoff = min(2 * backoff, MAX_BACKOFF_S)
+                backoff.reset()
+            log(f"stream {k} (STTP {spec.host}:{spec.port}): {err or type(err).__name__}; reconnecting in "
+                f"{backoff.s:g} s")
+            backoff.wait(stop)
             continue
+        _close(session, log)
+
+
+def _close(session, log):
+    """Close a session; what it still hands over waits at most the stream's timeout_s."""
+    try:
         session.close()
+    except TimeoutError as err:
+        log(f"stream {session.k}: the last frames of the connection were lost: {err}")
 
 
 class _Resubscribe(Exception):
@@ -637,9 +648,13 @@ class _Session:
         except queue.Full:
             self.lost["inbox_overflow"] += 1
 
+    def put(self, kind: str, x):
+        """(k, kind, x, arrival) on the monitor's queue, waiting at most the stream's timeout_s."""
+        put(self.out, (self.k, kind, x, time.monotonic()), self.spec.timeout_s, "the monitor's main thread")
+
     def _frames(self, frames):
         for frame in frames:
-            self.out.put((self.k, "frame", frame))
+            self.put("frame", frame)
 
     def run(self, stop: threading.Event):
         from sttp.config import Config
@@ -675,7 +690,7 @@ class _Session:
             if now - last > spec.timeout_s:
                 raise TimeoutError(f"no measurement for {spec.timeout_s:g} s")
             if self.asm is not None and now - reported > 0.2:
-                self.out.put((self.k, "counts", {**self.asm.counts, **self.lost}))
+                self.put("counts", {**self.asm.counts, **self.lost})
                 reported = now
 
     def _metadata(self):
@@ -693,19 +708,19 @@ class _Session:
         new = Assembler(served, points, rate, hold, self.state["cfgcnt"])
         if self.asm is not None:               # a change within this connection
             self._frames(self.asm.flush())
-            self.out.put((self.k, "counts", {**self.asm.counts, **self.lost}))
+            self.put("counts", {**self.asm.counts, **self.lost})
             self.asm = None
-            self.out.put((self.k, "frame", new.config))
+            self.put("frame", new.config)
             raise _Resubscribe()
         self.asm = new
-        self.out.put((self.k, "frame", self.asm.config))
+        self.put("frame", self.asm.config)
         if not self.up:
-            self.out.put((self.k, "up", f"{self.spec.host}:{self.spec.port}"))
+            self.put("up", f"{self.spec.host}:{self.spec.port}")
             self.up = True
 
     def close(self):
         if self.asm is not None:
             self._frames(self.asm.flush())
-            self.out.put((self.k, "counts", {**self.asm.counts, **self.lost}))
+            self.put("counts", {**self.asm.counts, **self.lost})
             self.asm = None
         self.sub.dispose()

@@ -4,8 +4,9 @@
 ``/state.json`` every second and draws, per unit, H with its 95 % band over the last
 ``HISTORY`` updates (dots coloured by the window's verdict; a grey gap where a window did not
 excite H), the latest value with its interval, D, the estimate's age and the alarm, and above
-them the streams' frames, missing and late frames, disconnects and the delay from a frame's
-timestamp to its estimate. The server binds 127.0.0.1 unless told otherwise and answers only
+them the streams' frames used, grid slots without a frame, late frames, disconnects and the
+delay from a frame's timestamp to its estimate in stream time (and in wall time where a stream
+does not run in real time). The server binds 127.0.0.1 unless told otherwise and answers only
 those two paths.
 """
 
@@ -72,10 +73,11 @@ function chart(h){
 async function tick(){
   let s;
   try{s=await (await fetch("state.json",{cache:"no-store"})).json()}catch(e){return}
-  const d=s.delay_s;
+  const d=s.delay_s,w=s.wall_delay_s;
+  const slow=s.streams.some(x=>x.pace&&Math.abs(x.pace-1)>0.01);
   document.getElementById("status").textContent=
-    (s.t?utc(s.t)+" | ":"")+s.units.length+" unit(s) | "+s.streams.map(x=>`stream ${x.stream} ${x.host}:${x.port}: frames ${x.frames||0}, missing ${x.missing_frames||0}, late ${x.late_or_repeated||0}, disconnects ${x.disconnects||0}`).join("; ")+
-    (d?` | delay frame to estimate: median ${fmt(d.median,2)} s, 99 % ${fmt(d.p99,2)} s`:"");
+    (s.t?utc(s.t)+" | ":"")+s.units.length+" unit(s) | "+s.streams.map(x=>`stream ${x.stream} ${x.host}:${x.port}: frames used ${x.frames_used||0}, grid slots without a frame ${x.slots_without_frame||0}, late frames ${x.late_frames||0}, disconnects ${x.disconnects||0}`+(x.pace&&Math.abs(x.pace-1)>0.01?`, at ${fmt(x.pace,2)}x real time`:"")).join("; ")+
+    (d?` | delay frame to estimate: median ${fmt(d.median,2)} s, 99 % ${fmt(d.p99,2)} s of stream time`+(slow&&w?` (${fmt(w.median,2)} s, ${fmt(w.p99,2)} s of wall time)`:""):"");
   document.getElementById("grid").innerHTML=s.units.map(u=>{
     const l=u.latest||{},c=COLOURS[l.verdict]||"#555";
     return `<div class="unit${l.alarm?" alarm":""}" data-unit="${u.unit}"><span class="name">${u.unit}</span>`+
