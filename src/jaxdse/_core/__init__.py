@@ -4,5 +4,6 @@ Stages in pipeline order: ``recording`` (and ``sequence``) -> ``mapping`` -> ``a
 (with ``machine``) -> ``signals`` -> ``governor`` -> ``drem`` (on ``integrate``) ->
 ``playback`` -> ``metrics``; ``front_end`` chains the per-sample stages, ``estimate``
 orchestrates them and ``result`` builds the :class:`Estimate`. ``plant`` and ``settings``
-hold the shared parameter types, ``fields`` and ``xla`` small helpers.
+hold the shared parameter types, ``xla`` small helpers (the blocks and parameter checks that
+the standard models share are in ``jaxdse._base``).
 """

@@ -38,7 +38,7 @@ import jax.tree_util as jtu
 from jaxtyping import Array, Float
 
 from .._models.governors import AbstractGovernor
-from .fields import as_float, check_positive
+from .._base.fields import as_float, check_positive
 from .integrate import Integrator, Previous, integrate_sampled
 from .metrics import smape_terms
 

@@ -27,7 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .fields import as_float, check_nonnegative, check_positive, concrete
+from .._base.fields import as_float, check_nonnegative, check_positive, concrete
 
 
 class QAxisCircuits(eqx.Module):

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Complex, Float
 
-from .fields import as_float, check_nonnegative, check_positive, concrete
+from .._base.fields import as_float, check_nonnegative, check_positive, concrete
 from .xla import hoist
 
 Location = Literal["substation", "hv", "terminal"]

@@ -19,7 +19,7 @@ import equinox as eqx
 from jaxtyping import Array, Float
 
 from .._models.governors import TGOV1, AbstractGovernor
-from .fields import as_float, check_nonnegative, check_positive
+from .._base.fields import as_float, check_nonnegative, check_positive
 from .machine import Machine
 from .mapping import AuxiliarySystem, Line, Transformer
 

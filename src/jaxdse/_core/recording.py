@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .fields import as_float
+from .._base.fields import as_float
 from .mapping import LOCATIONS, Location
 from .sequence import positive_sequence
 

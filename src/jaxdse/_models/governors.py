@@ -34,12 +34,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._core.blocks import blocked as _blocked
-from .._core.blocks import lag as _lag
-from .._core.blocks import lead_lag as _lead_lag
-from .._core.blocks import safe as _safe
-from .._core.blocks import washout as _washout
-from .._core.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
+from .._base.blocks import blocked as _blocked
+from .._base.blocks import lag as _lag
+from .._base.blocks import lead_lag as _lead_lag
+from .._base.blocks import safe as _safe
+from .._base.blocks import washout as _washout
+from .._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
 
 
 class AbstractGovernor(eqx.Module):

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from .._core.fields import as_float, check_nonnegative, check_positive, concrete
+from .._base.fields import as_float, check_nonnegative, check_positive, concrete
 from .base import record_message
 
 

@@ -47,10 +47,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._core.blocks import lag as _lag
-from .._core.blocks import lead_lag as _lead_lag
-from .._core.blocks import safe as _safe
-from .._core.fields import all_concrete, as_float, check_nonnegative, check_that
+from .._base.blocks import lag as _lag
+from .._base.blocks import lead_lag as _lead_lag
+from .._base.blocks import safe as _safe
+from .._base.fields import all_concrete, as_float, check_nonnegative, check_that
 from .base import AbstractStabiliser, StabiliserInputs, record_message
 
 INPUT_MODES = {

@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._core.algebraic import algebraic_observer
-from .._core.fields import as_float
+from .._base.fields import as_float
 from .._core.integrate import Integrator, solve_interval
 from .._core.machine import electrical_torque, field_voltage, swing_acceleration, transient_emf_rate
 from .._core.mapping import (

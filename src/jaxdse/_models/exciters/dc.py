@@ -9,8 +9,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..._core.blocks import blocked, lag, lead_lag, nonwindup_lag, washout
-from ..._core.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from ..._base.blocks import blocked, lag, lead_lag, nonwindup_lag, washout
+from ..._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
 from ..base import AbstractExciter, ExciterInputs
 from .common import nonzero as _nonzero
 from .common import saturation_product

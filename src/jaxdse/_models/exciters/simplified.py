@@ -7,8 +7,8 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..._core.blocks import lead_lag, nonwindup_lag
-from ..._core.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from ..._base.blocks import lead_lag, nonwindup_lag
+from ..._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
 from ..base import AbstractExciter, ExciterInputs
 
 # --- SEXS -------------------------------------------------------------------------------------
