@@ -941,6 +941,8 @@ its model's checks refuse):</p><ul>{reasons}</ul>
 def _accounting_html(doc: dict) -> str:
     """Every generator record of the .raw (the counts add up), every one not checked with its
     reason, and the .dyr records of no generator."""
+    from .fleet_report import record_tables
+
     a = doc["summary"]["accounting"]
     by = ", ".join(f"{n} {html.escape(k)}" for k, n in a["checked_by_category"].items())
     items = [f"<li><b>{a['checked']}</b> checked ({by}; a machine model jaxdse does not know is "
@@ -951,30 +953,11 @@ def _accounting_html(doc: dict) -> str:
         if a[k]:
             more = f" ({off} with a machine record)" if k == "out of service" and off else ""
             items.append(f"<li><b>{a[k]}</b> {html.escape(words)}{more}</li>")
-    rows = "".join(
-        f"<tr><td>{r['bus']}</td><td>{html.escape(r['id'])}</td><td>{r['line']}</td>"
-        f"<td>{html.escape(r['category'])}</td><td>{html.escape(' '.join(r['models']) or '–')}</td>"
-        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
-        for r in doc["not_checked"])
-    recs = "".join(
-        f"<tr><td>{html.escape(r['model'])}</td><td>{r['line']}</td><td>{r['bus']}</td>"
-        f"<td>{html.escape(r['id'])}</td><td>{html.escape(r['category'])}</td>"
-        f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
-        for r in doc["dyr_records_not_used"])
-    unreadable = "".join(f"<li>{html.escape(x)}</li>" for x in doc["dyr_records_unreadable"])
     return (f"<p>Every generator record of {html.escape(Path(doc['case']['raw']).name)}: "
             f"<b>{a['generator_records']}</b>, of which</p><ul>{''.join(items)}</ul>"
-            + (f"<details><summary>The {len(doc['not_checked'])} generator records not checked, and "
-               "why</summary><table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
-               f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
-               "</table></details>" if rows else "")
-            + (f"<p>.dyr records of no generator in the .raw (not used): {len(doc['dyr_records_not_used'])}"
-               f" ({a['dyr_records_orphaned']} orphaned, {a['dyr_records_bus_level']} of a bus or plant)"
-               "</p><table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th>"
-               f"<th>id</th><th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>"
-               if recs else "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
-            + (f"<p>.dyr records the reader could not attribute (not used):</p><ul>{unreadable}</ul>"
-               if unreadable else ""))
+            + record_tables(doc["not_checked"], "not checked", doc["dyr_records_not_used"],
+                            f" ({a['dyr_records_orphaned']} orphaned, {a['dyr_records_bus_level']} of a bus "
+                            "or plant)", doc["dyr_records_unreadable"]))
 
 
 def write_check(out_dir: Path, doc: dict) -> None:

@@ -380,30 +380,37 @@ def accounting_section(doc: dict) -> str:
     a = acc["summary"]
     items = [f"<li><b>{a['in_fleet']}</b> units of the plants estimated above</li>"]
     items += [f"<li><b>{a[k]}</b> {html.escape(w)}</li>" for k, w in acc["categories"].items() if a[k]]
+    return (f"<h2>Every generator record of the case</h2><p>{html.escape(Path(doc['case']['raw']).name)} "
+            f"has <b>{a['generator_records']}</b> generator records:</p><ul>{''.join(items)}</ul>"
+            + record_tables(acc["generators_not_in_fleet"], "not in the fleet", acc["dyr_records_not_used"],
+                            "", acc["dyr_records_unreadable"]))
+
+
+def record_tables(generators: list[dict], left_out: str, records: list[dict], counts: str,
+                  unreadable: list[str]) -> str:
+    """The generator records left out (``left_out``: in words) with their reasons, the .dyr
+    records of no generator (``counts``: their categories in words), the unreadable ones."""
     rows = "".join(
         f"<tr><td>{r['bus']}</td><td>{html.escape(r['id'])}</td><td>{r['line']}</td>"
         f"<td>{html.escape(r['category'])}</td><td>{html.escape(' '.join(r['models']) or '–')}</td>"
         f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
-        for r in acc["generators_not_in_fleet"])
+        for r in generators)
     recs = "".join(
         f"<tr><td>{html.escape(r['model'])}</td><td>{r['line']}</td><td>{r['bus']}</td>"
         f"<td>{html.escape(r['id'])}</td><td>{html.escape(r['category'])}</td>"
         f"<td style=\"text-align:left\" class=\"small\">{html.escape(r['why'])}</td></tr>"
-        for r in acc["dyr_records_not_used"])
-    unreadable = "".join(f"<li>{html.escape(x)}</li>" for x in acc["dyr_records_unreadable"])
-    return (f"<h2>Every generator record of the case</h2><p>{html.escape(Path(doc['case']['raw']).name)} "
-            f"has <b>{a['generator_records']}</b> generator records:</p><ul>{''.join(items)}</ul>"
-            + (f"<details><summary>The {len(acc['generators_not_in_fleet'])} not in the fleet, and why"
-               "</summary><table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
-               f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
-               "</table></details>" if rows else "")
-            + (f"<p>.dyr records of no generator in the .raw (not used): "
-               f"{len(acc['dyr_records_not_used'])}</p>"
-               "<table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th><th>id</th>"
-               f"<th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>" if recs else
-               "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
-            + (f"<p>.dyr records the reader could not attribute:</p><ul>{unreadable}</ul>"
-               if unreadable else ""))
+        for r in records)
+    bad = "".join(f"<li>{html.escape(x)}</li>" for x in unreadable)
+    return ((f"<details><summary>The {len(generators)} generator records {left_out}, and why</summary>"
+             "<table class=\"sortable\"><thead><tr><th>bus</th><th>id</th><th>.raw line</th>"
+             f"<th>category</th><th>.dyr records</th><th>why</th></tr></thead><tbody>{rows}</tbody>"
+             "</table></details>" if rows else "")
+            + (f"<p>.dyr records of no generator in the .raw (not used): {len(records)}{counts}</p>"
+               "<table class=\"sortable\"><thead><tr><th>record</th><th>.dyr line</th><th>bus</th>"
+               f"<th>id</th><th>category</th><th>why</th></tr></thead><tbody>{recs}</tbody></table>"
+               if recs else "<p>Every .dyr record belongs to a generator record of the .raw.</p>")
+            + (f"<p>.dyr records the reader could not attribute (not used):</p><ul>{bad}</ul>"
+               if bad else ""))
 
 
 def _damping_line(s: dict) -> str:
