@@ -53,10 +53,14 @@ def write_repair(case, doc: dict, out_dir: Path) -> dict:
 
 
 def _rel(path, start: Path) -> str:
+    """``path`` relative to ``start`` where they share a folder below the root, else absolute."""
+    a, b = Path(path).resolve(), start.resolve()
     try:
-        return os.path.relpath(Path(path).resolve(), start.resolve())
+        if os.path.commonpath([a, b]) != a.anchor:
+            return os.path.relpath(a, b)
     except ValueError:      # another drive
-        return str(Path(path).resolve())
+        pass
+    return str(a)
 
 
 def _case_text(case, dyrs: list[str], out_dir: Path) -> str:

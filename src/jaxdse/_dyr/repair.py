@@ -172,7 +172,8 @@ def plan(doc: dict, dyr: DyrData, *, ke_zero: str = "psse") -> Plan:
             k = names.index(con)
             old = float(rec.constants[k])
             why = (f"{lim['signal']} = {_g(lim['value'])} {lim['side']} {lim['con']} = {_g(lim['bound'])}; "
-                   f"{lim['con']} made {_g(target)}, the signal {100 * MARGIN:g} % inside it")
+                   f"{lim['con']} {'at least' if lim['side'] == 'above' else 'at most'} {_g(target)} puts the "
+                   f"signal {100 * MARGIN:g} % inside it")
             tm0 = (e.get("numbers") or {}).get("tm0_pu")
             if rec.model in GOVERNOR_FIELDS and tm0 is not None and tm0 > 1.0:
                 why += (f" (TM0 = PG/MBASE = {_g(tm0)}: PG is {100 * tm0:.0f} % of MBASE; an MBASE in the "
