@@ -204,11 +204,12 @@ SHARED = {
                  "core/test_identify.py"),
     "isone": ("app/test_isone.py",),
     "demo": ("app/test_cli.py", "core/test_accuracy.py"),
+    "check": ("app/test_check.py", "app/test_repair.py"),
 }
 """xdist work units of modules that share compiled pipeline shapes or session runs: `jaxdse run`
 on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``assess_jit`` on
 ``cut25`` (pipeline); the ISO-NE run (isone, with test_run's CLI test of it); ``demo_run``
-(demo)."""
+(demo); the check's program of the ieee14 case with three bad records (check)."""
 
 
 LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py",

@@ -49,13 +49,23 @@ def _stiff(text: str, bus: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+REPAIR = ("/ jaxdse repair: VMAX of TGOV1 bus 1 id '1': 0.9 -> 1.05 (ieee14.dyr line 4): valve0 = TM0 = 1 "
+          "above VMAX = 0.9; VMAX at least 1.05 puts the signal 5 % inside it\n")
+
+
+def _repaired(text: str) -> str:
+    """B1_G1's TGOV1 as ``jaxdse check --repair`` leaves a record it changed: its comment line
+    before it (the values are the case's)."""
+    return text.replace("1 'TGOV1' 1 ", REPAIR + "1 'TGOV1' 1 ", 1)
+
+
 @pytest.fixture(scope="module")
 def fleet_run(tmp_path_factory):
-    """One fleet run: B1_G1 with its own records, B2_G1 with its exciter renamed to a model
-    jaxdse does not simulate (EXELI, same constants), B3_G1 with a stiff GENROU (X''d = 0.005 pu,
-    Xl = 0.1 pu: a fastest mode near -3000 1/s)."""
+    """One fleet run: B1_G1 with its own records (its governor's as repaired), B2_G1 with its
+    exciter renamed to a model jaxdse does not simulate (EXELI, same constants), B3_G1 with a
+    stiff GENROU (X''d = 0.005 pu, Xl = 0.1 pu: a fastest mode near -3000 1/s)."""
     tmp = tmp_path_factory.mktemp("dyr_fleet")
-    text = _stiff((DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'"), bus=3)
+    text = _stiff(_repaired((DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'")), bus=3)
     path = _case(tmp, text, tags=("B1_G1", "B2_G1", "B3_G1"))
     assert main(["fleet", str(path), "--out", str(tmp / "out")]) == 0
     return tmp, json.loads((tmp / "out" / "fleet.json").read_text())
@@ -73,6 +83,12 @@ def test_fleet_dyr_playback_matches_andes(fleet_run):
     assert u["validation"]["result"] == "pass" and u["validation"]["model"] == "dyr"
     page = (tmp / "out" / "units" / "B1_G1.html").read_text()
     assert "own PSS/E records" in page and "ESST3A" in page
+    # the repaired record's change, on fleet.json and the page
+    (line,) = u["repairs"]
+    assert line.startswith("TGOV1 on bus 1 id '1' (case.dyr line 5): VMAX 0.9 -> 1.05 by jaxdse check "
+                           "--repair")
+    assert "Repaired records" in page and "VMAX 0.9 -&gt; 1.05" in page
+    assert {e["name"]: e for e in doc["units"]}["B2_G1"]["repairs"] == []
 
 
 def test_fleet_dyr_falls_back_for_an_unsimulated_model(fleet_run):
@@ -107,7 +123,7 @@ def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     (as in ``fleet_run``, whose compiled shapes the round trip shares): it is skipped."""
     truth = json.loads((DATA / "truth.json").read_text())
     h_true = next(m["H_s_mbase"] for m in truth["machines"] if m["tag"] == "B1_G1")
-    text = (DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'")
+    text = _repaired((DATA / "ieee14.dyr").read_text().replace("2 'EXST1'", "2 'EXELI'"))
     first = text.index("1 'GENROU'")
     rec = text[first:text.index("/", first)]
     cons = rec.split()
@@ -136,6 +152,8 @@ def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     assert all(p["filed_value"] == p["dyr_value"] for k, p in b1.items() if k != "H")
     assert all(not ev["worse_beyond_noise"] for ev in u["B1_G1"]["per_event"])
     assert u["B1_G1"]["outcome"] == "changed H"
+    assert len(u["B1_G1"]["repairs"]) == 1 and "VMAX 0.9 -> 1.05" in u["B1_G1"]["repairs"][0]
+    assert "Repaired records" in (tmp_path / "val" / "units" / "B1_G1.html").read_text()
     cal = jd.read_dyr(tmp_path / "val" / "calibrated.dyr")
     genrou = [r for r in cal.records if r.model == "GENROU" and r.bus == 1]
     assert len(genrou) == 1 and genrou[0]["H"] == pytest.approx(b1["H"]["calibrated_value"], rel=1e-5)

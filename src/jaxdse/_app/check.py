@@ -103,6 +103,7 @@ from .._version import __version__
 from .dyr_fleet import PlaybackOptions
 from .fleet_file import TOP
 from .progress import Progress
+from .repair import attach_carried, repair_console, repair_html, write_repair
 
 OUTCOMES = ("pass", "data problem", "not supported", "fail")
 """The outcomes of a unit, in the order of the summary."""
@@ -460,7 +461,8 @@ def _at(r: _Result, j: int) -> dict:
 def _limit(rec: DyrRecord, c) -> dict:
     """A limit crossed at the initial state, for check.json."""
     return {"record": rec.model, "line": rec.line, "signal": c.signal, "value": c.value, "con": c.con,
-            "bound": c.bound, "side": c.side, "context": c.context}
+            "bound": c.bound, "side": c.side, "context": c.context,
+            "fix": None if c.fix is None else c.fix._asdict()}
 
 
 def _stiff(r: dict, spec: CheckSpec, solver: tuple[str, float]) -> str:
@@ -717,6 +719,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         "group_times_s": times,
     }
     _finite(doc)
+    attach_carried(doc, dyr)
     return doc
 
 
@@ -862,6 +865,7 @@ def console_table(doc: dict) -> str:
         for e in sorted(bad, key=lambda e: (OUTCOMES.index(e["outcome"]), e["bus"], e["id"])):
             more = f" (+{len(e['reasons']) - 1} more)" if len(e["reasons"]) > 1 else ""
             lines.append(f"  {e['name']:<{nw}}  {e['outcome']:<13}  {e['reasons'][0]}{more}")
+    lines.extend(repair_console(doc))
     lines.append("")
     lines.append(f"{s['pass']} pass ({s['pass_percent']:.1f} %), {s['data problem']} data problem, "
                  f"{s['not supported']} not supported, {s['fail']} fail, of {s['units']} "
@@ -923,6 +927,7 @@ simulated and no value at fault found, but not steady or not settled.</p>
 <p>Data problems (the record and the limit its initial operating point crosses, or the values
 its model's checks refuse):</p><ul>{reasons}</ul>
 <p>Models not simulated:</p><ul>{unsupported}</ul>
+{repair_html(doc)}
 <h2>Model chains</h2>
 <table class="sortable"><thead><tr><th>machine exciter stabiliser governor</th><th>units</th>
 {''.join(f'<th>{o}</th>' for o in OUTCOMES)}</tr></thead><tbody>{chains}</tbody></table>
@@ -974,13 +979,22 @@ def _jsonable(x):
     raise TypeError(f"not JSON serialisable: {type(x).__name__}")
 
 
-def run_check(path, out: Path | None = None, *, out_of_service: bool = False) -> dict:
-    """``jaxdse check``: load, check, print the table, write ``out`` when given."""
-    doc = check_case(load_case(path), out_of_service=out_of_service)
+def run_check(path, out: Path | None = None, *, out_of_service: bool = False, repair: bool = False) -> dict:
+    """``jaxdse check``: load, check, print the table, write ``out`` when given; with ``repair``,
+    write repaired.dyr, repairs.csv and repaired.toml (into ``out``, else beside the case file)
+    and the change table into the outputs (:mod:`jaxdse._app.repair`)."""
+    case = load_case(path)
+    doc = check_case(case, out_of_service=out_of_service)
+    if repair:
+        doc["repair"] = write_repair(case, doc, Path(out) if out is not None else Path(path).parent)
     print(console_table(doc))
     if out is not None:
         write_check(out, doc)
         print(f"wrote {Path(out) / 'check.json'} and {Path(out) / 'check.html'}")
+    if repair:
+        files = doc["repair"]["files"]
+        print(f"wrote {files['dyr']}, {files['csv']} and {files['case']}; check the repaired case: "
+              f"jaxdse check {files['case']}")
     return doc
 
 

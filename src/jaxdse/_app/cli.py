@@ -464,12 +464,28 @@ the counts). With --out DIR:
                    definition
   DIR/check.html   the same as a page: counts, reasons, sortable table
 
+With --repair, every data problem that is a crossed limit is repaired: the constant that sets
+the limit (e.g. HYGOV GMAX, IEEEG1 PMAX, GGOV1 Vmax) is moved so that the signal lies 5 % of its
+value (at least 0.01 pu) inside it, rounded outward to 4 significant figures; nothing else
+changes (a DC exciter whose VRMAX = 0 stated computed limits gets both written out). Written
+into DIR (or beside CASE.toml):
+  repaired.dyr     the case's .dyr, each changed constant replaced in place, a PSS/E comment
+                   line "/ jaxdse repair: CON of MODEL bus N id 'ID': OLD -> NEW (FILE line L):
+                   WHY" before its record (jaxdse reads them back: every page of a repaired
+                   unit, in check, fleet and validate, lists its changes)
+  repairs.csv      one row per change: unit, bus, id, record, file, line, con, con_number, old,
+                   new, signal, value, limit, bound, side, why
+  repaired.toml    the case with the repaired .dyr: jaxdse check DIR/repaired.toml
+and the change table on the console, in check.json ("repair") and check.html. Data problems
+that are not a crossed limit (values the model's checks refuse) are listed as not repaired.
+
 Exit status: 0 whatever the outcomes; 2 on unreadable input (a missing or malformed file, no
 synchronous unit) with a one-line message.
 
 examples:
   jaxdse check experiments/activsg2000/case.toml --out activsg2000_check/   # needs ../shared/data
   jaxdse check experiments/andes_bench/fleet_npcc.toml
+  jaxdse check experiments/activsg2000/case.toml --repair --out activsg2000_repaired/
 """
 
 
@@ -510,7 +526,8 @@ def _fleet(args) -> int:
 def _check(args) -> int:
     from .check import run_check
 
-    run_check(args.case, Path(args.out) if args.out else None, out_of_service=args.out_of_service)
+    run_check(args.case, Path(args.out) if args.out else None, out_of_service=args.out_of_service,
+              repair=args.repair)
     return 0
 
 
@@ -683,6 +700,9 @@ def build_parser() -> argparse.ArgumentParser:
     ch.add_argument("--out", metavar="DIR", default=None, help="write DIR/check.json and DIR/check.html")
     ch.add_argument("--out-of-service", action="store_true",
                     help="also check the units switched off in the .raw (STAT = 0), at their PG, QG")
+    ch.add_argument("--repair", action="store_true",
+                    help="write repaired.dyr (each crossed limit moved, a comment per change), "
+                         "repairs.csv and repaired.toml into DIR (or beside CASE.toml)")
     ch.set_defaults(func=_check)
     ps = sub.add_parser("pmu-sim", help="serve a recording as a live C37.118 PMU stream (loopback)",
                         description=PMU_SIM_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)

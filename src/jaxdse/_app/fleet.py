@@ -188,6 +188,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "other_units_on_bus": list(p.others),
         "fallbacks": list(p.fallbacks),
         "data_warnings": [*p.data_warnings, *p.run.notes],   # records and plant data used as given
+        "repairs": list(p.repairs),                          # jaxdse check --repair's changes
         "machine": module_values(m),
         "columns": dict(p.run.measurement.columns),
         "current_direction": p.run.measurement.current_direction,

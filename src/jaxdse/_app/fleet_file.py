@@ -22,6 +22,7 @@ from .._core.drem import ObserverConfig
 from .._core.identify import IdentifySettings
 from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
+from .._dyr.repair import carried_lines
 from .._io.config import GeneratorRun
 from .._io.errors import InputError
 from .._io.psse import DyrData, RawCase, merge_dyr, read_dyr, read_raw
@@ -70,6 +71,10 @@ class FleetPlant:
     evaluated), one line each naming the record and the values, e.g. "GENROU on bus 3 id '1'
     (case.dyr line 7): X''d = 0.12 below Xl = 0.15 (used as given; PSS/E warns and simulates
     it)". The fleet.json entry's ``data_warnings``; the unit page lists them."""
+    repairs: tuple[str, ...] = ()
+    """The changes ``jaxdse check --repair`` made to the plant's records (the .dyr's
+    ``/ jaxdse repair:`` lines), one line each naming the record, the CON, the original and the
+    repaired value and why. The fleet.json entry's ``repairs``; the unit page lists them."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -173,7 +178,9 @@ def load_fleet(path) -> Fleet:
             continue
         built.append(FleetPlant(name, bus, tuple(units.members), tuple(units.others), run,
                                 fallbacks=tuple(_one_line(n) for n in (*units.notes, *notes)),
-                                data_warnings=tuple(_one_line(n) for n in units.data_warnings)))
+                                data_warnings=tuple(_one_line(n) for n in units.data_warnings),
+                                repairs=tuple(carried_lines(r for m in units.members
+                                                            for r in dyr.unit_records(bus, m.id)))))
     if not built:
         if skipped:
             first = skipped[0]

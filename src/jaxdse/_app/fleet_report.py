@@ -235,6 +235,15 @@ def _f(x, spec=".2f") -> str:
     return "–" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
+def repairs_box(lines: list[str]) -> str:
+    """A unit page's list of the changes ``jaxdse check --repair`` made to its records."""
+    if not lines:
+        return ""
+    return ('<div class="datawarn"><b>Repaired records</b> (changed by <code>jaxdse check --repair</code> '
+            "so that the unit can start at rest; the model run here is the repaired one):<ul>"
+            + "".join(f"<li>{html.escape(x)}</li>" for x in lines) + "</ul></div>")
+
+
 def _ci(e) -> str:
     lo, hi = e["H_ci95"]
     return f"{_f(lo)} – {_f(hi) if hi is not None else '∞'}"
@@ -436,6 +445,7 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
                      "given: their equations can be evaluated, as PSS/E simulates them):<ul>"
                      + "".join(f"<li>{html.escape(w)}</li>" for w in warnings) + "</ul></div>"
                      if warnings else "")
+    repaired = repairs_box(e.get("repairs") or [])
     why = {"identified": "The recording determines H to within ±10 % at 95 % confidence.",
            "weakly identified": "An estimate is given, but it is not tight enough to file as identified:",
            "not identified": "The recording does not tell H apart; the number is not usable:",
@@ -493,6 +503,7 @@ def unit_page(e: dict, doc: dict, figures: bool) -> str:
 governor model(s): {html.escape(', '.join(e['governor_models']))}; PMU at the
 {'machine terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
 {data_warnings}
+{repaired}
 <p>Two separate results: what the recording says about the inertia H, and whether the
 played-back model matches the recorded response. Neither implies the other.</p>
 <h2>Inertia H: {_badge(e['verdict'])}</h2><p>{why}</p>{f'<ul>{reasons}</ul>' if reasons else ''}

@@ -50,6 +50,7 @@ from .._dyr.playback import PlaybackSettings, play_back
 from .._io.errors import InputError
 from .._io.measurement import condition, order_note
 from .._io.psse import GOVERNOR_FIELDS, GOVERNOR_PARAMETERS, MACHINE_FIELDS
+from .._io.psse_dyr import repair_comment
 from .._io.readers import load_table
 from .._models.exciters import _ATTRIBUTES as EXCITER_ATTRIBUTES
 from .._models.exciters import EXCITER_FIELDS
@@ -57,7 +58,7 @@ from .._models.stabilisers import STABILISER_FIELDS
 from .._version import __version__
 from .dyr_fleet import plant_model, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
-from .fleet_report import _page
+from .fleet_report import _page, repairs_box
 from .progress import Progress
 
 DEFAULT_PARAMETERS = {
@@ -204,6 +205,7 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         after = [jax.tree.map(np.asarray, jax.jit(play_back)(after_unit, s, playback)) for s in series]
         entry.update(_unit_entry(um, specs, ranking, decision, series, before, after, p))
         entry["notes"] = notes
+        entry["repairs"] = list(p.repairs)
         units.append(entry)
         if decision is not None and decision.changed:
             changed.append((p, um, decision))
@@ -348,6 +350,7 @@ def calibrated_dyr(fleet: Fleet, changed) -> str:
                     v = math.degrees(v)
                 cons[k] = float(v)
             body = " ".join(_fmt(c) if isinstance(c, float) else str(c) for c in cons)
+            lines.extend(repair_comment(c) for c in rec.changes)   # a repaired record stays so
             lines.append(f"{rec.bus} '{rec.model}' {rec.id} {body} /")
     return "\n".join(lines) + "\n"
 
@@ -461,6 +464,7 @@ def unit_page(e: dict) -> str:
 <p>Records: {html.escape(models)}. NERC MOD-026-2 model validation: the recorded terminal voltage
 and frequency are imposed on the unit's own model; its active and reactive power are compared
 with the recording (the Transmission Planner sets the acceptance criteria).</p>
+{repairs_box(e.get("repairs") or [])}
 <p>{words}</p>{refused}
 <img src="{html.escape(e['name'])}.png" alt="P and Q with residuals, V, f: measured, before and after">
 <h2>Playback error by event</h2>

@@ -14,6 +14,11 @@ current; the limits are the record's CONs as the model applies them (scaled by t
 voltage where the model library does so). A model without an entry here still gets the generic
 finding of :func:`jaxdse._app.check` (its EFD or TM at the initial state differs from the power
 flow's), without the CON named.
+
+Each crossing of a limit that one CON of the record sets also says how the limit follows from
+that CON (:class:`Fix`: the limit = scale·CON + offset at this operating point), so that
+:mod:`jaxdse._dyr.repair` can move the CON to where the signal fits; a limit no CON sets (an
+exciter's floor at 0) has none.
 """
 
 from __future__ import annotations
@@ -42,6 +47,16 @@ class Start(NamedTuple):
     """The exciter's voltage reference [pu]."""
 
 
+class Fix(NamedTuple):
+    """How a limit follows from one constant of the record, at the unit's operating point:
+    limit = ``scale`` · CON + ``offset``."""
+
+    con: str
+    """The record's constant (PSS/E name, as in its CON table: "VRMAX", "Ldref")."""
+    scale: float = 1.0
+    offset: float = 0.0
+
+
 class Crossing(NamedTuple):
     """A signal of the steady state outside one of its limits."""
 
@@ -55,6 +70,8 @@ class Crossing(NamedTuple):
     """"above" or "below"."""
     context: str = ""
     """The record's values the signal follows from, e.g. "VB = 0.9255 from KP = 1, ..."."""
+    fix: Fix | None = None
+    """The CON that sets the limit, and how (None: no CON sets it)."""
 
 
 def _g(x: float) -> str:
@@ -65,16 +82,23 @@ def _f(m, name: str) -> float:
     return float(np.asarray(getattr(m, name)))
 
 
-def _within(out: list, signal: str, value: float, lo: tuple[str, float] | None,
-            hi: tuple[str, float] | None, context: str = "") -> None:
-    """Append a :class:`Crossing` where ``value`` lies outside [lo, hi] by more than round-off."""
+def _within(out: list, signal: str, value: float, lo: tuple | None, hi: tuple | None,
+            context: str = "") -> None:
+    """Append a :class:`Crossing` where ``value`` lies outside [lo, hi] by more than round-off;
+    ``lo``, ``hi``: (the limit as the record names it, its value[, :class:`Fix`]); without a
+    Fix, a limit named by a CON alone (an upper-case name) is that CON, scale 1."""
     for bound, side in ((hi, "above"), (lo, "below")):
         if bound is None:
             continue
-        con, b = bound
+        con, b = bound[:2]
+        fix = bound[2] if len(bound) > 2 else (Fix(con) if _is_con(con) else None)
         tol = 1e-9 * max(1.0, abs(b))
         if (side == "above" and value > b + tol) or (side == "below" and value < b - tol):
-            out.append(Crossing(signal, value, con, b, side, context))
+            out.append(Crossing(signal, value, con, b, side, context, fix))
+
+
+def _is_con(name: str) -> bool:
+    return name.replace("(", "").replace(")", "").isalnum() and not name[0].isdigit()
 
 
 # --- exciters -----------------------------------------------------------------------------------
@@ -97,8 +121,9 @@ def _dc(scaled: bool, floor: bool):
         out: list = []
         k = s.vt if scaled else 1.0
         pre = "VT·" if scaled else ""
-        _within(out, "VR0 = (KE + SE(EFD0))·EFD0", float(y[2]), (pre + "VRMIN", k * _f(m, "vr_min_pu")),
-                (pre + "VRMAX", k * _f(m, "vr_max_pu")))
+        _within(out, "VR0 = (KE + SE(EFD0))·EFD0", float(y[2]),
+                (pre + "VRMIN", k * _f(m, "vr_min_pu"), Fix("VRMIN", k)),
+                (pre + "VRMAX", k * _f(m, "vr_max_pu"), Fix("VRMAX", k)))
         if floor:
             _within(out, "EFD0", s.efd0, ("0 (the exciter's floor)", 0.0), None)
         return out
@@ -109,8 +134,9 @@ def _exst1(m, y, s: Start):
     out: list = []
     ka, kc = _f(m, "ka"), _f(m, "kc")
     _within(out, "VI0 = EFD0/KA", s.efd0 / ka, ("VIMIN", _f(m, "vi_min_pu")), ("VIMAX", _f(m, "vi_max_pu")))
-    _within(out, "EFD0", s.efd0, ("VT·VRMIN - KC·IFD0", s.vt * _f(m, "vr_min_pu") - kc * s.ifd),
-            ("VT·VRMAX - KC·IFD0", s.vt * _f(m, "vr_max_pu") - kc * s.ifd))
+    _within(out, "EFD0", s.efd0,
+            ("VT·VRMIN - KC·IFD0", s.vt * _f(m, "vr_min_pu") - kc * s.ifd, Fix("VRMIN", s.vt, -kc * s.ifd)),
+            ("VT·VRMAX - KC·IFD0", s.vt * _f(m, "vr_max_pu") - kc * s.ifd, Fix("VRMAX", s.vt, -kc * s.ifd)))
     return out
 
 
@@ -139,8 +165,9 @@ def _esst1a(m, y, s: Start):
             ("VAMAX", _f(m, "va_max_pu")))
     _within(out, "VI0 = VA0/KA", va / _f(m, "ka"), ("VIMIN", _f(m, "vi_min_pu")),
             ("VIMAX", _f(m, "vi_max_pu")))
-    _within(out, "EFD0", s.efd0, ("VT·VRMIN", s.vt * _f(m, "vr_min_pu")),
-            ("VT·VRMAX - KC·IFD0", s.vt * _f(m, "vr_max_pu") - _f(m, "kc") * s.ifd))
+    kc = _f(m, "kc")
+    _within(out, "EFD0", s.efd0, ("VT·VRMIN", s.vt * _f(m, "vr_min_pu"), Fix("VRMIN", s.vt)),
+            ("VT·VRMAX - KC·IFD0", s.vt * _f(m, "vr_max_pu") - kc * s.ifd, Fix("VRMAX", s.vt, -kc * s.ifd)))
     return out
 
 
@@ -194,9 +221,10 @@ def _exac2(m, y, s: Start):
     _within(out, "VA0 = VFE0/KB + KH·VFE0", va, ("VAMIN", _f(m, "va_min_pu")), ("VAMAX", _f(m, "va_max_pu")))
     _within(out, "VR0 = " + VFE, vfe, ("VRMIN", _f(m, "vr_min_pu")), ("VRMAX", _f(m, "vr_max_pu")),
             _vfe_context(m, s, float(y[3])))
-    vl = _f(m, "kl") * (_f(m, "vlr_pu") - vfe)
+    kl = _f(m, "kl")
+    vl = kl * (_f(m, "vlr_pu") - vfe)
     _within(out, "VA0 - KH·VFE0 (the regulator's path into the LV gate)", va - _f(m, "kh") * vfe,
-            None, ("VL = KL·(VLR - VFE0), the field current limiter", vl))
+            None, ("VL = KL·(VLR - VFE0), the field current limiter", vl, Fix("VLR", kl, -kl * vfe)))
     _ac_common(out, m, y, s)
     return out
 
@@ -206,8 +234,8 @@ def _esac6a(m, y, s: Start):
     va = float(y[1])
     vfe = float(y[4]) + _f(m, "vfe_lim_pu")
     _within(out, "VA0 = VFE0 + VH0", va, ("VAMIN", _f(m, "va_min_pu")), ("VAMAX", _f(m, "va_max_pu")))
-    _within(out, "VR0 = " + VFE, vfe, ("VT·VRMIN", s.vt * _f(m, "vr_min_pu")),
-            ("VT·VRMAX", s.vt * _f(m, "vr_max_pu")), _vfe_context(m, s, float(y[3])))
+    _within(out, "VR0 = " + VFE, vfe, ("VT·VRMIN", s.vt * _f(m, "vr_min_pu"), Fix("VRMIN", s.vt)),
+            ("VT·VRMAX", s.vt * _f(m, "vr_max_pu"), Fix("VRMAX", s.vt)), _vfe_context(m, s, float(y[3])))
     _ac_common(out, m, y, s)
     return out
 
@@ -241,7 +269,7 @@ def _ieeeg1(m, s: Start):
 def _gast(m, s: Start):
     out: list = []
     _within(out, "valve0 = TM0", s.tm0, ("VMIN", _f(m, "v_min_pu")), ("VMAX", _f(m, "v_max_pu")))
-    _within(out, "valve0 = TM0", s.tm0, None, ("AT (the load limit)", _f(m, "at_pu")))
+    _within(out, "valve0 = TM0", s.tm0, None, ("AT (the load limit)", _f(m, "at_pu"), Fix("AT")))
     return out
 
 
@@ -261,8 +289,8 @@ def _ggov1(m, s: Start):
     what = "FSR0 = TM0/Kturb + Wfnl" if ratio == 1.0 else "FSR0 = TM0/(Trate/MBASE)/Kturb + Wfnl"
     ctx = f"Kturb = {_g(kt)}, Wfnl = {_g(wfnl)}{base}"
     _within(out, what, fsr, ("Vmin", _f(m, "v_min_pu")), ("Vmax", _f(m, "v_max_pu")), ctx)
-    _within(out, what, fsr, None, ("Ldref/Kturb + Wfnl (the load limiter)", _f(m, "ldref_pu") / kt + wfnl),
-            ctx + f", Ldref = {_g(_f(m, 'ldref_pu'))}")
+    _within(out, what, fsr, None, ("Ldref/Kturb + Wfnl (the load limiter)", _f(m, "ldref_pu") / kt + wfnl,
+                                    Fix("Ldref", 1.0 / kt, wfnl)), ctx + f", Ldref = {_g(_f(m, 'ldref_pu'))}")
     return out
 
 
@@ -308,5 +336,5 @@ def governor_crossings(model: str, module, start: Start) -> list[Crossing]:
     return [] if f is None else f(module, start)
 
 
-__all__ = ["EXCITER_LIMITS", "GOVERNOR_LIMITS", "Crossing", "Start", "describe", "exciter_crossings",
+__all__ = ["EXCITER_LIMITS", "GOVERNOR_LIMITS", "Crossing", "Fix", "Start", "describe", "exciter_crossings",
            "governor_crossings"]

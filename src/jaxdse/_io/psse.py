@@ -46,10 +46,12 @@ from .psse_dyr import (
     OPTIONAL_TRAILING,
     PSSE_GOVERNOR_MODELS,
     TYPED_MODELS,
+    DyrChange,
     DyrData,
     DyrRecord,
     merge_dyr,
     read_dyr,
+    repair_comment,
 )
 from .psse_raw import (
     SUPPORTED_RAW_REVISIONS,
@@ -68,11 +70,11 @@ __all__ = [
     "BIG_SHUNT_PU", "DEFAULT_TAP_STEP", "GENCLS_TD0_S", "GOVERNOR_FIELDS", "GOVERNOR_PARAMETERS",
     "ROUND_ROTOR", "SALIENT_POLE",
     "MACHINE_FIELDS", "OPTIONAL_TRAILING", "PSSE_GOVERNOR_MODELS", "SUPPORTED_RAW_REVISIONS",
-    "TYPED_MODELS", "DyrData", "DyrRecord", "MachineTransientData", "RawBranch", "RawBus",
+    "TYPED_MODELS", "DyrChange", "DyrData", "DyrRecord", "MachineTransientData", "RawBranch", "RawBus",
     "RawCase", "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer",
     "generator_label", "governor_from_dyr", "governor_module", "load_unit", "machine_kwargs",
     "machine_problems",
     "machine_warnings",
-    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "read_raw", "record_label",
+    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "read_raw", "record_label", "repair_comment",
     "transformer_kwargs", "transformer_sides", "transient_data",
 ]

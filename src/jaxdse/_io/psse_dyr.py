@@ -3,8 +3,16 @@
 Format (Siemens PTI, *PSS(R)E Program Operation Manual*, "Dynamics data file"): records
 ``IBUS 'MODEL' ID con con ... /``, free format, any number of lines per record, fields
 separated by blanks or commas, the model name and the machine ID quoted or not; the ``/`` ends a
-record and the rest of that line is a comment; ``@!`` lines are comments. Numbers may be
+record and the rest of that line is a comment; ``@!`` lines are comments, and so is a line
+that starts with ``/`` (an empty record, which PSS/E skips, with its comment). Numbers may be
 Fortran-style (``0.5E-01``, ``1.D-2``).
+
+A repair written by ``jaxdse check --repair`` travels in the file as such comment lines, one
+per changed constant, before the record (:func:`repair_comment`, e.g. ``/ jaxdse repair: GMAX
+of HYGOV bus 3105 id '1': 1 -> 2.247 (ACTIVSg2000_dynamics.dyr line 204): gate0 = ...``): PSS/E
+skips them, and this reader attaches each to the record of the same model, bus and machine ID
+(:attr:`DyrRecord.changes`), wherever in the file it stands. One that names no record of the
+file is listed in ``problems``.
 
 Readers work at the edge (plain Python, never inside jit). Every user mistake raises
 :class:`InputError`, a one-line message naming the file, the line (``row``) and the record.
@@ -17,6 +25,7 @@ attributed are dropped and listed in ``problems`` of the file.
 from __future__ import annotations
 
 import math
+import re
 from collections import Counter
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -103,6 +112,56 @@ record is one jaxdse does not model runs with constant mechanical torque, and sa
 # --- records ----------------------------------------------------------------------------------
 
 @dataclass(frozen=True)
+class DyrChange:
+    """One constant of a record changed by ``jaxdse check --repair``, as the repaired file
+    states it in a ``/ jaxdse repair: ...`` comment line (:func:`repair_comment`)."""
+
+    model: str
+    bus: int
+    id: str
+    con: str
+    """The constant's PSS/E name (e.g. "GMAX")."""
+    old: float
+    """Its value in the original record."""
+    new: float
+    """Its value in the repaired record."""
+    origin: str
+    """Where the original record stands, e.g. "case.dyr line 204"."""
+    why: str
+    """The limit crossed and the rule applied, one line."""
+    line: int = 0
+    """The comment's line in the file read (0: not read from a file)."""
+
+
+REPAIR_TAG = "jaxdse repair:"
+_REPAIR = re.compile(r"^\s*/\s*jaxdse repair:\s*(?P<con>\S+) of (?P<model>\S+) bus (?P<bus>-?\d+) "
+                     r"id '(?P<id>[^']*)': (?P<old>\S+) -> (?P<new>\S+) \((?P<origin>[^)]*)\): "
+                     r"(?P<why>.*?)\s*$")
+
+
+def _num(x: float) -> str:
+    return f"{x:.7g}"
+
+
+def repair_comment(c: DyrChange) -> str:
+    """The .dyr comment line that carries ``c`` (read back by :func:`read_dyr`)."""
+    return (f"/ {REPAIR_TAG} {c.con} of {c.model} bus {c.bus} id '{c.id}': {_num(c.old)} -> "
+            f"{_num(c.new)} ({c.origin}): {' '.join(c.why.split())}")
+
+
+def _repair_of(text: str, line: int) -> DyrChange | None:
+    m = _REPAIR.match(text)
+    if m is None:
+        return None
+    try:
+        old, new = parse_number(m["old"]), parse_number(m["new"])
+    except ValueError:
+        return None
+    return DyrChange(model=m["model"].upper(), bus=int(m["bus"]), id=m["id"].strip(), con=m["con"],
+                     old=old, new=new, origin=m["origin"], why=m["why"], line=line)
+
+
+@dataclass(frozen=True)
 class DyrRecord:
     """One .dyr record: ``bus 'MODEL' id constants /``.
 
@@ -125,6 +184,9 @@ class DyrRecord:
     """Why the record cannot be used (the one-line message strict reading raises); only with
     ``read_dyr(..., strict=False)``. ``params`` then holds NaN for the unreadable constants
     (or is empty when their number is wrong)."""
+    changes: tuple[DyrChange, ...] = field(default=(), repr=False)
+    """The repairs the file records for this record (``/ jaxdse repair: ...`` comment lines,
+    written by ``jaxdse check --repair``), in file order."""
 
     @property
     def kind(self) -> str:
@@ -217,11 +279,9 @@ def merge_dyr(base: DyrData, *overrides: DyrData) -> DyrData:
 
 # --- .dyr reader ------------------------------------------------------------------------------
 
-def _tokens(text: str):
-    """Split one line into (tokens, ended): blanks/commas separate, quotes group, '/' ends.
-
-    Quoted tokens keep their quotes so that callers can tell a string from a number.
-    """
+def token_spans(text: str) -> tuple[list[tuple[int, int]], bool]:
+    """(the (start, end) of each token of one line, ended): blanks/commas separate, quotes
+    group, '/' ends. A quoted token's span includes its quotes."""
     out, i, n = [], 0, len(text)
     while i < n:
         ch = text[i]
@@ -233,15 +293,22 @@ def _tokens(text: str):
             j = text.find(ch, i + 1)
             if j < 0:
                 raise ValueError(f"unclosed quote {ch} in {text.strip()!r}")
-            out.append(text[i:j + 1])
+            out.append((i, j + 1))
             i = j + 1
         else:
             j = i
             while j < n and text[j] not in " \t,\r\n/'\"":
                 j += 1
-            out.append(text[i:j])
+            out.append((i, j))
             i = j
     return out, False
+
+
+def _tokens(text: str):
+    """Split one line into (tokens, ended) (:func:`token_spans`). Quoted tokens keep their
+    quotes so that callers can tell a string from a number."""
+    spans, ended = token_spans(text)
+    return [text[a:b] for a, b in spans], ended
 
 
 def read_dyr(path, *, strict: bool = True) -> DyrData:
@@ -257,7 +324,7 @@ def read_dyr(path, *, strict: bool = True) -> DyrData:
     if not path.exists():
         raise InputError(path, "file does not exist")
     source = str(path)
-    records, empty, problems = [], 0, []
+    records, empty, problems, changes = [], 0, [], []
     tokens: list[str] = []
     start, broken = 0, None
 
@@ -277,6 +344,16 @@ def read_dyr(path, *, strict: bool = True) -> DyrData:
         for number, text in enumerate(f, start=1):
             if is_comment(text):
                 continue
+            if not tokens and text.lstrip().startswith("/"):
+                change = _repair_of(text, number)
+                if change is not None:
+                    changes.append(change)
+                elif text.lstrip()[1:].lstrip().startswith(REPAIR_TAG):
+                    problems.append(str(InputError(source, f"a '{REPAIR_TAG}' comment not in the form "
+                                                   "'/ jaxdse repair: CON of MODEL bus N id 'ID': OLD -> "
+                                                   "NEW (ORIGIN): WHY': ignored", row=number)))
+                if text.lstrip()[1:].strip():
+                    continue                # a comment line (a lone '/' is an empty record)
             try:
                 toks, ended = _tokens(text)
             except ValueError as e:
@@ -299,7 +376,28 @@ def read_dyr(path, *, strict: bool = True) -> DyrData:
         if strict:
             raise err
         close(broken or str(err))
-    return DyrData(source=source, records=records, empty_records=empty, problems=problems)
+    return DyrData(source=source, records=_attach(records, changes, source, problems),
+                   empty_records=empty, problems=problems)
+
+
+def _attach(records: list[DyrRecord], changes: list[DyrChange], source: str,
+            problems: list[str]) -> list[DyrRecord]:
+    """``records`` with each repair comment attached to the record it names (the first of
+    that model, bus and ID); one that names none is listed in ``problems``."""
+    if not changes:
+        return records
+    at = {}
+    for k, r in enumerate(records):
+        at.setdefault((r.model, r.bus, r.id.upper()), k)
+    mine: dict[int, list[DyrChange]] = {}
+    for c in changes:
+        k = at.get((c.model, c.bus, c.id.upper()))
+        if k is None:
+            problems.append(str(InputError(source, f"a '{REPAIR_TAG}' comment for {c.model} bus {c.bus} "
+                                           f"id {c.id!r}, a record not in this file: ignored", row=c.line)))
+            continue
+        mine.setdefault(k, []).append(c)
+    return [replace(r, changes=(*r.changes, *mine[k])) if k in mine else r for k, r in enumerate(records)]
 
 
 def _dyr_record(tokens: list[str], source: str, line: int, strict: bool = True) -> DyrRecord:
@@ -357,5 +455,6 @@ def _dyr_record(tokens: list[str], source: str, line: int, strict: bool = True) 
 
 __all__ = [
     "GOVERNOR_FIELDS", "GOVERNOR_PARAMETERS", "MACHINE_FIELDS", "OPTIONAL_TRAILING",
-    "PSSE_GOVERNOR_MODELS", "TYPED_MODELS", "DyrData", "DyrRecord", "merge_dyr", "read_dyr",
+    "PSSE_GOVERNOR_MODELS", "REPAIR_TAG", "TYPED_MODELS", "DyrChange", "DyrData", "DyrRecord",
+    "merge_dyr", "read_dyr", "repair_comment", "token_spans",
 ]
