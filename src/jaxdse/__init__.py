@@ -120,6 +120,7 @@ from ._models.exciters import EXDC2 as EXDC2
 from ._models.exciters import EXPIC1 as EXPIC1
 from ._models.exciters import EXST1 as EXST1
 from ._models.exciters import IEEET1 as IEEET1
+from ._models.exciters import IEEET2 as IEEET2
 from ._models.exciters import IEEEX1 as IEEEX1
 from ._models.exciters import SCRX as SCRX
 from ._models.exciters import SEXS as SEXS
@@ -141,6 +142,7 @@ from ._models.stabilisers import IEEEST as IEEEST
 from ._models.stabilisers import PSS2A as PSS2A
 from ._models.stabilisers import PSS2B as PSS2B
 from ._models.stabilisers import ST2CUT as ST2CUT
+from ._models.stabilisers import STAB2A as STAB2A
 from ._sim.simulate import Event as Event
 from ._sim.simulate import Exciter as Exciter
 from ._sim.simulate import Scenario as Scenario

@@ -242,7 +242,8 @@ def _esac6a(m, y, s: Start):
 
 EXCITER_LIMITS: dict[str, Callable] = {
     "SEXS": _sexs, "SCRX": _scrx,
-    "IEEEX1": _dc(False, False), "IEEET1": _dc(False, False), "ESDC1A": _dc(False, True),
+    "IEEEX1": _dc(False, False), "IEEET1": _dc(False, False), "IEEET2": _dc(False, False),
+    "ESDC1A": _dc(False, True),
     "EXDC2": _dc(True, False), "ESDC2A": _dc(True, True),
     "EXST1": _exst1, "ESST3A": _esst3a, "ESST4B": _esst4b, "ESST1A": _esst1a, "EXPIC1": _expic1,
     "ESAC1A": _esac1a, "EXAC1": _exac1, "EXAC2": _exac2, "ESAC6A": _esac6a,

@@ -1,5 +1,5 @@
-"""PSS/E power system stabilisers IEEEST, ST2CUT, PSS2A and PSS2B: VOTHSG from one or two
-input signals.
+"""PSS/E power system stabilisers IEEEST, ST2CUT, PSS2A, PSS2B and STAB2A: VOTHSG from one or
+two input signals.
 
 Conventions (every model, PSS/E behaviour where the library states it):
 
@@ -602,6 +602,91 @@ class PSS2B(PSS2A):
                 jnp.clip(u2, self.vs2_min_pu, self.vs2_max_pu))
 
 
+# --- STAB2A -----------------------------------------------------------------------------------
+
+class STAB2A(AbstractStabiliser):
+    """PSS/E STAB2A, the ASEA power-sensitive stabilising unit: VOTHSG from the electrical power.
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "STAB2A"; the block order and the place
+    of K2 cross-read in OpenIPSL ``OpenIPSL.Electrical.Controls.PSSE.PSS.STAB2A``, which cites
+    the PSS/E manual, and the IEC 61970-302 ``PssSTAB2A`` parameter list; no code taken)::
+
+        w1  = -K2 s T2/(1 + s T2) PELEC
+        w2  =  K2 s T2/(1 + s T2) w1
+        w3  =  K2 s T2/(1 + s T2) w2
+        y   = K3/(1 + s T3) w3 + K4 w3
+        VOTHSG = clip(K5/(1 + s T5) K5/(1 + s T5) y, -HLIM, HLIM)
+
+    8 CONs (no ICON): K2 [-], T2 [s] (> 0), K3 [-], T3 [s], K4 [-], K5 [-], T5 [s], HLIM [pu]
+    (>= 0). PELEC is the machine's electrical power [pu on MBASE, positive generating], the
+    input that the other stabilisers take as MODE 3.
+
+    The three washouts carry K2 each (an overall K2^3), as OpenIPSL draws them; the PSS/E text
+    itself was not available here to settle whether K2 sits in the first washout only. Every
+    STAB2A record in the public Nordic 44 case has K2 = 1, where both readings coincide.
+
+    States: [w1 washout, w2 washout, w3 washout, K3 lag, first K5 lag, second K5 lag]. At
+    constant PELEC = p0 the rest state is [p0, 0, 0, 0, 0, 0] and VOTHSG = 0. T3 = 0 and T5 = 0
+    make their lags gains (state kept, zero derivative); T2 must be > 0 (T2 = 0 would make the
+    output identically 0: ValueError when concrete). The output limit clips the last lag's
+    output (no state is held).
+    """
+
+    k2: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """K2: gain of each of the three washouts [-]."""
+    t2_s: Float[Array, ""] = eqx.field(converter=as_float, default=4.0)
+    """T2: washout time constant [s] (> 0)."""
+    k3: Float[Array, ""] = eqx.field(converter=as_float, default=0.25)
+    """K3: gain of the low-pass branch [-]."""
+    t3_s: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """T3: time constant of the low-pass branch [s] (0: gain K3)."""
+    k4: Float[Array, ""] = eqx.field(converter=as_float, default=0.075)
+    """K4: gain of the proportional branch [-]."""
+    k5: Float[Array, ""] = eqx.field(converter=as_float, default=2.5)
+    """K5: gain of each of the two output lags [-]."""
+    t5_s: Float[Array, ""] = eqx.field(converter=as_float, default=4.5)
+    """T5: time constant of each output lag [s] (0: gain K5)."""
+    h_lim_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """HLIM: output limit, VOTHSG within [-HLIM, HLIM] [pu] (>= 0)."""
+
+    def __check_init__(self):
+        check_nonnegative(self, "t3_s", "t5_s", "h_lim_pu")
+        if all_concrete(self.t2_s):
+            check_that(self, self.t2_s > 0,
+                       f"T2 must be > 0 (washouts K2 s T2/(1 + s T2)), got {self.t2_s}")
+
+    @property
+    def n_states(self) -> int:
+        return 6
+
+    @property
+    def remote_input_at_terminal(self) -> bool:
+        """Always False: STAB2A takes the machine's own electrical power."""
+        return False
+
+    def _path(self, state, inputs):
+        p = _signal(inputs, 3)
+        w1, d1 = _washout(p, state[0], -self.k2, self.t2_s, self.t2_s)
+        w2, d2 = _washout(w1, state[1], self.k2, self.t2_s, self.t2_s)
+        w3, d3 = _washout(w2, state[2], self.k2, self.t2_s, self.t2_s)
+        y3, d4 = _lag(self.k3 * w3, state[3], self.t3_s)
+        a, d5 = _lag(self.k5 * (y3 + self.k4 * w3), state[4], self.t5_s)
+        b, d6 = _lag(self.k5 * a, state[5], self.t5_s)
+        return b, jnp.stack([d1, d2, d3, d4, d5, d6])
+
+    def initial_state(self, inputs: StabiliserInputs):
+        p = _signal(inputs, 3)
+        zero = jnp.zeros_like(p)
+        return jnp.stack([p, zero, zero, zero, zero, zero])
+
+    def vector_field(self, state, inputs: StabiliserInputs):
+        return self._path(state, inputs)[1]
+
+    def output(self, state, inputs: StabiliserInputs):
+        v, _ = self._path(state, inputs)
+        return jnp.clip(v, -self.h_lim_pu, self.h_lim_pu)
+
+
 # --- .dyr records -----------------------------------------------------------------------------
 
 STABILISER_FIELDS = {
@@ -614,12 +699,13 @@ STABILISER_FIELDS = {
     "PSS2B": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N", "TW1", "TW2", "T6", "TW3", "TW4",
               "T7", "KS2", "KS3", "T8", "T9", "KS1", "T1", "T2", "T3", "T4", "T10", "T11",
               "VS1MAX", "VS1MIN", "VS2MAX", "VS2MIN", "VSTMAX", "VSTMIN"),
+    "STAB2A": ("K2", "T2", "K3", "T3", "K4", "K5", "T5", "HLIM"),
 }
 """PSS/E names of each stabiliser record's constants in PSS/E order, ICONs first."""
 
 STABILISER_ICONS = {"IEEEST": ("MODE", "busr"), "ST2CUT": ("MODE", "busr", "MODE2", "busr2"),
                     "PSS2A": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N"),
-                    "PSS2B": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N")}
+                    "PSS2B": ("ICS1", "REMBUS1", "ICS2", "REMBUS2", "M", "N"), "STAB2A": ()}
 """The integer constants (ICONs) of each record."""
 
 _PSS2A_PARAMETERS = {
@@ -642,10 +728,12 @@ STABILISER_PARAMETERS = {
     "PSS2A": _PSS2A_PARAMETERS,
     "PSS2B": {**_PSS2A_PARAMETERS, "t10_s": "T10", "t11_s": "T11", "vs1_max_pu": "VS1MAX",
               "vs1_min_pu": "VS1MIN", "vs2_max_pu": "VS2MAX", "vs2_min_pu": "VS2MIN"},
+    "STAB2A": {"k2": "K2", "t2_s": "T2", "k3": "K3", "t3_s": "T3", "k4": "K4", "k5": "K5",
+               "t5_s": "T5", "h_lim_pu": "HLIM"},
 }
 """Field of the stabiliser module (``STABILISERS[model]``) -> the PSS/E constant it takes."""
 
-STABILISERS = {"IEEEST": IEEEST, "ST2CUT": ST2CUT, "PSS2A": PSS2A, "PSS2B": PSS2B}
+STABILISERS = {"IEEEST": IEEEST, "ST2CUT": ST2CUT, "PSS2A": PSS2A, "PSS2B": PSS2B, "STAB2A": STAB2A}
 
 
 def stabiliser_from_dyr(model: str, constants: Sequence[float]) -> AbstractStabiliser:
@@ -678,5 +766,5 @@ def stabiliser_from_dyr(model: str, constants: Sequence[float]) -> AbstractStabi
         raise ValueError(record_message(str(err), model, STABILISER_PARAMETERS[model])) from None
 
 
-__all__ = ["IEEEST", "INPUT_MODES", "PSS2A", "PSS2B", "RTF_MAX_STAGES", "ST2CUT", "STABILISERS",
+__all__ = ["IEEEST", "INPUT_MODES", "PSS2A", "PSS2B", "RTF_MAX_STAGES", "ST2CUT", "STAB2A", "STABILISERS",
            "STABILISER_FIELDS", "STABILISER_ICONS", "STABILISER_PARAMETERS", "stabiliser_from_dyr"]

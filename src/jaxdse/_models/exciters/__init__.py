@@ -1,5 +1,5 @@
 """PSS/E excitation-system models as equinox modules, by IEEE Std 421.5 type: ``dc`` (IEEEX1,
-IEEET1, EXDC2, ESDC1A, ESDC2A), ``st`` (EXST1, ESST1A, ESST3A, ESST4B, EXPIC1),
+IEEET1, IEEET2, EXDC2, ESDC1A, ESDC2A), ``st`` (EXST1, ESST1A, ESST3A, ESST4B, EXPIC1),
 ``simplified`` (SEXS, SCRX), ``ac`` (ESAC1A, EXAC1,
 EXAC2, ESAC6A); the registry of PSS/E names and CON orders, and :func:`exciter_from_dyr`, the
 one place that reads a record into a module.
@@ -48,7 +48,7 @@ from typing import Literal
 from ..base import AbstractExciter, record_message
 from .ac import ESAC1A, ESAC6A, EXAC1, EXAC2
 from .common import rectifier_fex, saturation, saturation_product
-from .dc import ESDC1A, ESDC2A, EXDC2, IEEET1, IEEEX1
+from .dc import ESDC1A, ESDC2A, EXDC2, IEEET1, IEEET2, IEEEX1
 from .simplified import SCRX, SEXS
 from .st import ESST1A, ESST3A, ESST4B, EXPIC1, EXST1
 
@@ -56,7 +56,7 @@ from .st import ESST1A, ESST3A, ESST4B, EXPIC1, EXST1
 
 EXCITERS: dict[str, type[AbstractExciter]] = {
     "SEXS": SEXS, "IEEEX1": IEEEX1, "EXDC2": EXDC2, "ESDC2A": ESDC2A, "EXST1": EXST1, "ESST3A": ESST3A,
-    "IEEET1": IEEET1, "ESDC1A": ESDC1A, "ESST4B": ESST4B, "ESST1A": ESST1A, "SCRX": SCRX,
+    "IEEET1": IEEET1, "IEEET2": IEEET2, "ESDC1A": ESDC1A, "ESST4B": ESST4B, "ESST1A": ESST1A, "SCRX": SCRX,
     "EXPIC1": EXPIC1,
     "ESAC1A": ESAC1A, "EXAC1": EXAC1, "EXAC2": EXAC2, "ESAC6A": ESAC6A}
 """The exciter models by their PSS/E name."""
@@ -78,6 +78,7 @@ EXCITER_FIELDS: dict[str, tuple[str, ...]] = {
                "KI", "VBMAX", "KC", "XL", "VGMAX", "THETAP", "TM", "VMMAX", "VMMIN"),
     "IEEET1": ("TR", "KA", "TA", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF", "Switch", "E1", "SE(E1)",
                "E2", "SE(E2)"),
+    "IEEET2": ("TR", "KA", "TA", "VRMAX", "VRMIN", "KE", "TE", "KF", "TF1", "TF2", *_SAT_CONS),
     "ESDC1A": _DC_CONS,
     "ESST4B": ("TR", "KPR", "KIR", "VRMAX", "VRMIN", "TA", "KPM", "KIM", "VMMAX", "VMMIN", "KG", "KP",
                "KI", "VBMAX", "KC", "XL", "THETAP"),
@@ -109,6 +110,8 @@ _ATTRIBUTES: dict[str, tuple[str, ...]] = {
                "vg_max_pu", "theta_p_rad", "t_m_s", "vm_max_pu", "vm_min_pu"),
     "IEEET1": ("t_r_s", "ka", "t_a_s", "vr_max_pu", "vr_min_pu", "ke", "t_e_s", "kf", "t_f_s",
                "switch", "e1_pu", "se1", "e2_pu", "se2"),
+    "IEEET2": ("t_r_s", "ka", "t_a_s", "vr_max_pu", "vr_min_pu", "ke", "t_e_s", "kf", "t_f1_s",
+               "t_f2_s", *_SAT_FIELDS),
     "ESDC1A": _DC_FIELDS,
     "ESST4B": ("t_r_s", "kpr", "kir", "vr_max_pu", "vr_min_pu", "t_a_s", "kpm", "kim", "vm_max_pu",
                "vm_min_pu", "kg", "kp", "ki", "vb_max_pu", "kc", "xl_pu", "theta_p_rad"),
@@ -137,7 +140,7 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
     """The exciter of a PSS/E .dyr record: ``model`` (e.g. ``"ESST3A"``) and its CONs in order.
 
     Conversions: ESST3A and ESST4B THETAP from degrees to radians. DC exciters (IEEEX1, IEEET1,
-    EXDC2, ESDC1A, ESDC2A): VRMAX = 0
+    IEEET2, EXDC2, ESDC1A, ESDC2A): VRMAX = 0
     is PSS/E's "compute the limits" entry, VRMAX = (SE(E2) + KE)·E2 for KE > 0 and SE(E2)·E2
     otherwise, VRMIN = -VRMAX (PSS/E Program Application Guide, as OpenIPSL implements it);
     KE = 0 is kept (KE then follows from the initial EFD, see :class:`IEEEX1`). With
@@ -163,7 +166,7 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
     kwargs = dict(zip(_ATTRIBUTES[name], values))
     if name in ("ESST3A", "ESST4B"):
         kwargs["theta_p_rad"] = math.radians(kwargs["theta_p_rad"])
-    dc = name in ("IEEEX1", "IEEET1", "EXDC2", "ESDC1A", "ESDC2A")
+    dc = name in ("IEEEX1", "IEEET1", "IEEET2", "EXDC2", "ESDC1A", "ESDC2A")
     if dc and kwargs["vr_max_pu"] == 0.0 and ke_zero == "literal":
         kwargs["vr_max_pu"] = math.inf
     elif dc and kwargs["vr_max_pu"] == 0.0:
@@ -179,5 +182,5 @@ def exciter_from_dyr(model: str, constants: Sequence[float], *,
 
 
 __all__ = ["ESAC1A", "ESAC6A", "ESDC1A", "ESDC2A", "ESST1A", "ESST3A", "ESST4B", "EXAC1", "EXAC2",
-           "EXCITERS", "EXCITER_FIELDS", "EXDC2", "EXPIC1", "EXST1", "IEEET1", "IEEEX1", "SCRX",
+           "EXCITERS", "EXCITER_FIELDS", "EXDC2", "EXPIC1", "EXST1", "IEEET1", "IEEET2", "IEEEX1", "SCRX",
            "SEXS", "exciter_from_dyr", "rectifier_fex", "saturation", "saturation_product"]

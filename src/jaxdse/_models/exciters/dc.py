@@ -9,7 +9,7 @@ import equinox as eqx
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
-from ..._base.blocks import blocked, lag, lead_lag, nonwindup_lag, washout
+from ..._base.blocks import blocked, lag, lead_lag, nonwindup_lag, safe, washout
 from ..._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
 from ..base import AbstractExciter, ExciterInputs
 from .common import nonzero as _nonzero
@@ -264,4 +264,119 @@ class ESDC1A(_DCExciter):
         return blocked(x_efd, d, 0.0, jnp.inf)
 
 
-__all__ = ["ESDC1A", "ESDC2A", "EXDC2", "IEEEX1", "IEEET1"]
+class IEEET2(AbstractExciter):
+    """PSS/E IEEET2: the 1968 IEEE Type 2 excitation system (rate feedback from the regulator).
+
+    Block diagram (Siemens PTI *PSS/E Model Library*, "IEEET2"; IEEE Committee Report,
+    "Computer representation of excitation systems", IEEE Trans. PAS-87(6), 1968, type 2;
+    OpenIPSL ``IEEET2`` for the structure)::
+
+        VM  = EC/(1 + s TR)
+        VR  = KA/(1 + s TA) (Vref + VOTHSG - VM - VF), non-windup limits [VRMIN, VRMAX]
+        TE dEFD/dt = VR - (KE + SE(EFD)) EFD
+        VF  = s KF/((1 + s TF1)(1 + s TF2)) VR          (from VR, not from EFD as in IEEET1)
+
+    14 CONs: TR, KA, TA, VRMAX, VRMIN, KE, TE, KF, TF1, TF2, E1, SE(E1), E2, SE(E2). No limit
+    on EFD. The PSS/E quadratic saturation (:func:`saturation_product`), the KE = 0 rule
+    (``ke_zero``, as :class:`IEEEX1`) and the VRMAX = 0 rule of
+    :func:`~jaxdse._models.exciters.exciter_from_dyr` apply, as to the other DC exciters.
+
+    Zero time constants: TR = 0 and TA = 0 bypass their lags (TA = 0: VR = clip(KA u)); the
+    rate feedback needs TF1 > 0 or TF2 > 0 (both 0: no feedback); with one of them 0 it is the
+    filtered derivative s KF/(1 + s T) of VR with the other one, and with TA = 0 its loop
+    through the regulator is algebraic, solved exactly (VR = clip(KA (c - vf0)/(1 + KA KF/T))).
+
+    States: [VM, TF1 filter, VR, EFD, TF2 filter, KE] (VR, EFD and KE where the other DC
+    exciters hold them). At rest: VR0 = (KE + SE(EFD0)) EFD0, both filters at rest (the TF1
+    filter at VR0, the TF2 filter at 0, or at VR0 when TF1 = 0), Vref = EC + VR0/KA.
+    """
+
+    ke_zero: Literal["psse", "literal"] = eqx.field(static=True, default="psse", kw_only=True)
+    """How KE = 0 is read: PSS/E's self-excited rule, or literally."""
+
+    t_r_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """TR: voltage transducer time constant [s] (0: pass-through)."""
+    ka: Float[Array, ""] = eqx.field(converter=as_float, default=200.0)
+    """KA: voltage regulator gain [pu/pu] (> 0)."""
+    t_a_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TA: voltage regulator time constant [s] (0: gain KA, limited)."""
+    vr_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=6.0)
+    """VRMAX: upper limit of the regulator output VR [pu]."""
+    vr_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-6.0)
+    """VRMIN: lower limit of the regulator output VR [pu]."""
+    ke: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """KE: exciter field constant [pu] (0: computed at initialisation, see :class:`IEEEX1`)."""
+    t_e_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """TE: exciter time constant [s] (> 0)."""
+    kf: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """KF: rate feedback gain [pu/pu]."""
+    t_f1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """TF1: first rate feedback time constant [s]."""
+    t_f2_s: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """TF2: second rate feedback time constant [s]."""
+    e1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=2.8)
+    """E1: first exciter voltage at which the saturation is given [pu]."""
+    se1: Float[Array, ""] = eqx.field(converter=as_float, default=0.04)
+    """SE(E1): saturation factor at E1 [-]."""
+    e2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=3.7)
+    """E2: second exciter voltage at which the saturation is given [pu]."""
+    se2: Float[Array, ""] = eqx.field(converter=as_float, default=0.33)
+    """SE(E2): saturation factor at E2 [-]."""
+
+    def __check_init__(self):
+        check_positive(self, "ka", "t_e_s")
+        check_nonnegative(self, "t_r_s", "t_a_s", "kf", "t_f1_s", "t_f2_s", "e1_pu", "se1",
+                          "e2_pu", "se2")
+        if all_concrete(self.vr_max_pu, self.vr_min_pu):
+            check_that(self, self.vr_max_pu >= self.vr_min_pu,
+                       f"VRMAX ({self.vr_max_pu}) must be >= VRMIN ({self.vr_min_pu})")
+
+    @property
+    def n_states(self) -> int:
+        return 6
+
+    def _vx(self, efd):
+        return saturation_product(efd, self.e1_pu, self.se1, self.e2_pu, self.se2)
+
+    def _feedback(self):
+        """VF = k VR + vf0(state): (k, on1, on2); k != 0 when exactly one of TF1, TF2 is > 0."""
+        on1, on2 = self.t_f1_s > 0, self.t_f2_s > 0
+        k = jnp.where(on1 & ~on2, self.kf / safe(self.t_f1_s),
+                      jnp.where(~on1 & on2, self.kf / safe(self.t_f2_s), 0.0))
+        return k, on1, on2
+
+    def initial_state(self, efd0, inputs: ExciterInputs):
+        efd0 = jnp.asarray(efd0, float)
+        vt = jnp.asarray(inputs.vt_pu, float)
+        vx0 = self._vx(efd0)
+        ke_auto = self.vr_max_pu / (10.0 * _nonzero(efd0)) - vx0 / _nonzero(efd0)
+        ke = self.ke if self.ke_zero == "literal" else jnp.where(self.ke != 0, self.ke, ke_auto)
+        vr0 = ke * efd0 + vx0
+        x_f2 = jnp.where((self.t_f1_s > 0) | ~(self.t_f2_s > 0), 0.0, vr0)
+        return jnp.stack([vt, vr0, vr0, efd0, x_f2, ke]), vt + vr0 / self.ka
+
+    def vector_field(self, state, inputs: ExciterInputs, vref):
+        vm, d_m = lag(inputs.vt_pu, state[0], self.t_r_s)
+        k, on1, on2 = self._feedback()
+        vf0 = jnp.where(on1 & ~on2, -k * state[1],
+                        jnp.where(~on1 & on2, -k * state[4], jnp.where(on1 & on2, state[4], 0.0)))
+        c = vref + inputs.vs_pu - vm
+        on_a = self.t_a_s > 0
+        vr_alg = jnp.clip(self.ka * (c - vf0) / (1.0 + self.ka * k), self.vr_min_pu, self.vr_max_pu)
+        vr_state = jnp.clip(state[2], self.vr_min_pu, self.vr_max_pu)
+        vr = jnp.where(on_a, vr_state, vr_alg)
+        u = c - (k * vr + vf0)
+        d_r = jnp.where(on_a, blocked(state[2], (self.ka * u - state[2]) / safe(self.t_a_s),
+                                      self.vr_min_pu, self.vr_max_pu), 0.0)
+        d_f1 = jnp.where(on1, (vr - state[1]) / safe(self.t_f1_s), 0.0)
+        d_f2 = jnp.where(on1 & on2, (self.kf * d_f1 - state[4]) / safe(self.t_f2_s),
+                         jnp.where(~on1 & on2, (vr - state[4]) / safe(self.t_f2_s), 0.0))
+        efd = state[3]
+        d_e = (vr - state[5] * efd - self._vx(efd)) / self.t_e_s
+        return jnp.stack([d_m, d_f1, d_r, d_e, d_f2, jnp.zeros_like(d_e)])
+
+    def efd(self, state, inputs: ExciterInputs, vref):
+        return state[3]
+
+
+__all__ = ["ESDC1A", "ESDC2A", "EXDC2", "IEEEX1", "IEEET1", "IEEET2"]
