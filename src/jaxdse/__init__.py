@@ -48,6 +48,7 @@ from ._core.result import Scores as Scores
 from ._core.result import Trajectories as Trajectories
 from ._core.settings import Settings as Settings
 from ._core.tuning import LossWeights as LossWeights
+from ._core.verdict import NOTES as VERDICT_NOTES  # reasons that leave H's verdict alone
 from ._core.verdict import VERDICTS as VERDICTS
 from ._core.verdict import Verdict as Verdict
 from ._core.verdict import VerdictSettings as VerdictSettings
