@@ -38,14 +38,19 @@ X''d below Xl on every GENROU), simulated for the three events only::
 
 ``ieee14_lib``, ``npcc_lib``, ``wecc_lib`` (the recorded units' exciters swapped to the PSS/E
 library models of issue 33 that ANDES 2.0 has, every second governor to IEESGO; see "derived cases
-with the PSS/E library models" below), simulated for the line trip and the load step, without the
+with the PSS/E library models" below), simulated for the line trip and the load step (70 s), and
+for the large events (40 s, T_RUN): a generator trip and ``fault``, a bolted three-phase bus fault
+cleared after 0.1 s (FAULT_*; deep enough that exciter limits are reached: ANDES's limiter flags of
+every recorded unit's exciter and governor are recorded at each step into truth.json,
+``andes_limits_reached``, and the exciters' EFD into ``<event>_controls.csv.gz``), without the
 round trip (ANDES's .dyr reader takes ESAC1A and ESST1A constants in another order than the PSS/E
 order written); ``new_models.py`` plays them back::
 
-    S="--scenario line_trip load_step --no-verify"
-    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib wecc_lib $S
+    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib wecc_lib \
+        --scenario line_trip load_step --no-verify
+    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib --scenario fault gen_trip --no-verify
 
-Options: ``--scenario`` (any of line_trip, load_step, gen_trip, ambient; none: only rewrite and
+Options: ``--scenario`` (any of line_trip, load_step, gen_trip, fault, ambient; none: only rewrite and
 verify the .raw/.dyr), ``--no-verify`` (skip the .raw/.dyr round trip), ``--step-check`` (rerun at
 half the step and record the largest differences). Several runs of one case (e.g. one per scenario,
 in parallel) merge their results into truth.json. Output is deterministic (seeded noise, gzip
@@ -1056,8 +1061,9 @@ CASES["npcc_xd2_below_xl"] = dict(CASES["npcc"], modify=npcc_xd2_below_xl)
 # * ESST4B: ANDES applies KI and XL to the machine current on the system base: it gets
 #   KI, XL times Sb/MBASE (the .dyr gets the machine-base values, dyn_params converts back).
 #   KI = 0.1, XL = 0.05 (a compound source) so that the conversion matters. TA > 0 (ANDES's lag),
-#   limits wide enough not to be reached (ANDES's PI blocks track their limit, PSS/E's do not
-#   wind up); KG = 0 (ANDES's VG limit VGMAX is not in the PSS/E model).
+#   limits wide enough not to be reached in the line trip and load step (ANDES's PI blocks track
+#   their limit, PSS/E's do not wind up: the bolted fault reaches them, esst4b_pi.py shows the
+#   difference); KG = 0 (ANDES's VG limit VGMAX is not in the PSS/E model).
 # * IEEET1: KE = 1 (nonzero: ANDES reads KE = 0 literally, PSS/E computes it); VRMAX nonzero
 #   (ANDES turns VRMAX = 0 into 999).
 # * ESAC1A: KF = 0 (ANDES computes the rate feedback but does not feed it back), transient gain
