@@ -78,10 +78,16 @@ def block() -> str:
         out.append(
             f"- **The PSS/E library models of real cases against ANDES** (`experiments/andes_bench/new_models.md`, "
             f"`python experiments/andes_bench/new_models.py`): {', '.join(nm['by_model'])} on "
-            f"{s['units']} units ({s['machine_recordings']} machine-recordings, line trip and load step): median "
-            f"RMS error P {s['median_rms_P_percent_mbase']:.4f} %, Q {s['median_rms_Q_percent_mbase']:.4f} % of "
-            f"MBASE, largest P {s['max_rms_P_percent_mbase']:.3f} %, Q {s['max_rms_Q_percent_mbase']:.3f} %; "
-            f"event-window peak error within 10 % for {s['event_peak_within_10_percent']}; "
+            f"{s['units']} units ({s['machine_recordings']} machine-recordings, "
+            f"{', '.join(e.replace('_', ' ') for e in nm.get('by_event', {})) or 'line trip and load step'}): "
+            f"median RMS error P {s['median_rms_P_percent_mbase']:.4f} %, Q "
+            f"{s['median_rms_Q_percent_mbase']:.4f} % of MBASE, largest P {s['max_rms_P_percent_mbase']:.3f} %, "
+            f"Q {s['max_rms_Q_percent_mbase']:.3f} %"
+            + "".join(f"; {e.replace('_', ' ')}: largest P {v['max_rms_P_percent_mbase']:.3f} %, Q "
+                      f"{v['max_rms_Q_percent_mbase']:.3f} % ({v['within_target']} of {v['recordings']} "
+                      f"within 0.5 %, exciter limits reached in {v['exciter_limit_reached']})"
+                      for e, v in nm.get("by_event", {}).items())
+            + f"; event-window peak error within 10 % for {s['event_peak_within_10_percent']}; "
             f"{s['models_meeting_targets']} of {len(nm['by_model'])} models meet the targets.")
     fr = load("experiments/andes_bench/fleet_results.json")
     if fr:

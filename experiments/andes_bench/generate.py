@@ -38,14 +38,19 @@ X''d below Xl on every GENROU), simulated for the three events only::
 
 ``ieee14_lib``, ``npcc_lib``, ``wecc_lib`` (the recorded units' exciters swapped to the PSS/E
 library models of issue 33 that ANDES 2.0 has, every second governor to IEESGO; see "derived cases
-with the PSS/E library models" below), simulated for the line trip and the load step, without the
+with the PSS/E library models" below), simulated for the line trip and the load step (70 s), and
+for the large events (40 s, T_RUN): a generator trip and ``fault``, a bolted three-phase bus fault
+cleared after 0.1 s (FAULT_*; deep enough that exciter limits are reached: ANDES's limiter flags of
+every recorded unit's exciter and governor are recorded at each step into truth.json,
+``andes_limits_reached``, and the exciters' EFD into ``<event>_controls.csv.gz``), without the
 round trip (ANDES's .dyr reader takes ESAC1A and ESST1A constants in another order than the PSS/E
 order written); ``new_models.py`` plays them back::
 
-    S="--scenario line_trip load_step --no-verify"
-    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib wecc_lib $S
+    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib wecc_lib \
+        --scenario line_trip load_step --no-verify
+    $A experiments/andes_bench/generate.py --case ieee14_lib npcc_lib --scenario fault gen_trip --no-verify
 
-Options: ``--scenario`` (any of line_trip, load_step, gen_trip, ambient; none: only rewrite and
+Options: ``--scenario`` (any of line_trip, load_step, gen_trip, fault, ambient; none: only rewrite and
 verify the .raw/.dyr), ``--no-verify`` (skip the .raw/.dyr round trip), ``--step-check`` (rerun at
 half the step and record the largest differences). Several runs of one case (e.g. one per scenario,
 in parallel) merge their results into truth.json. Output is deterministic (seeded noise, gzip
@@ -77,12 +82,16 @@ AMBIENT_STEP_RATE = 120  # ambient: h = 1/120 s, 4 steps per 30 fps frame (the O
 TDS_TOL = 1e-6  # Newton tolerance of the ANDES implicit trapezoid
 T_EVENT = 10.0
 T_EVENT_RUN = 70.0
+T_RUN = {"gen_trip": 40.0, "fault": 40.0}  # the large events of the *_lib cases: 30 s after the event
 T_AMBIENT = 600.0
-FPS = {"line_trip": 60, "load_step": 60, "gen_trip": 60, "ambient": 30}
+FPS = {"line_trip": 60, "load_step": 60, "gen_trip": 60, "fault": 60, "ambient": 30}
 SCENARIOS = tuple(FPS)
 LOAD_STEP_FRACTION = 0.05  # load step: 5 % of the total system load
 LOAD_STEP_MAX_RISE = 0.25  # ... spread over the nearest loads so that none rises by more than 25 %
 GEN_TRIP_FRACTION = 0.03  # generator trip: the unrecorded unit whose output is nearest 3 % of load
+FAULT_DURATION_S = 0.1  # fault: a bolted three-phase bus fault, cleared after 6 cycles (no
+FAULT_XF_PU = 1e-4  # ... branch lost), at the bus with the most recorded units within 2 hops
+FAULT_HOPS = 2
 OU_TAU_S = 5.0  # ambient: time constant of every load's Ornstein-Uhlenbeck process
 # ou_sigma: relative std of each load; wecc at 0.05 lost synchronism within the 600 s, hence 0.02
 
@@ -328,7 +337,36 @@ def choose_events(ss, case, machines):
     gen = {"andes_idx": ss.GENROU.idx.v[gi], "bus": int(ss.GENROU.bus.v[gi]), "id": machine_id(ss, gi),
            "mbase_mva": float(ss.GENROU.Sn.v[gi]), "p_mw": float(pgen[gi] * sb),
            "q_mvar": float(_genrou_q0(ss)[gi] * sb), "recorded_elsewhere": gi in recorded}
-    return {"line_trip": line, "load_step": load, "gen_trip": gen}
+    # fault: the bus (not a recorded unit's terminal) with the most recorded units' terminal buses
+    # within FAULT_HOPS hops (then the most within 1 hop, then the lower bus number)
+    terminals = {m["bus"] for m in machines}
+
+    def hops_from(b0):
+        seen, front = {b0: 0}, [b0]
+        while front:
+            nxt = []
+            for b in front:
+                for c in adj[b]:
+                    if c not in seen and seen[b] < FAULT_HOPS:
+                        seen[c] = seen[b] + 1
+                        nxt.append(c)
+            front = nxt
+        return seen
+
+    def score(b):
+        h = hops_from(b)
+        return (sum(t in h for t in terminals), sum(h.get(t, 9) <= 1 for t in terminals), -int(b))
+
+    fbus = max((b for b in ss.Bus.idx.v if b not in terminals), key=score)
+    near = hops_from(fbus)
+    fault = {"bus": int(fbus), "kv": float(ss.Bus.Vn.v[ss.Bus.idx2uid(fbus)]),
+             "xf_pu_system_base": FAULT_XF_PU, "rf_pu_system_base": 0.0,
+             "clear_after_s": FAULT_DURATION_S,
+             "recorded_within_hops": {m["tag"]: near[m["bus"]] for m in machines if m["bus"] in near},
+             "rule": f"bolted three-phase fault (xf = {FAULT_XF_PU:g} pu) at the bus, other than a "
+                     f"recorded unit's terminal, with the most recorded terminals within {FAULT_HOPS} "
+                     f"hops; cleared after {FAULT_DURATION_S:g} s with no branch lost"}
+    return {"line_trip": line, "load_step": load, "gen_trip": gen, "fault": fault}
 
 
 def _genrou_p0(ss):
@@ -354,6 +392,10 @@ def event_models(scenario, ev):
         return [("Toggle", {"model": "Line", "dev": ev["line_trip"]["andes_idx"], "t": T_EVENT})]
     if scenario == "gen_trip":
         return [("Toggle", {"model": "GENROU", "dev": ev["gen_trip"]["andes_idx"], "t": T_EVENT})]
+    if scenario == "fault":
+        f = ev["fault"]
+        return [("Fault", {"bus": f["bus"], "tf": T_EVENT, "tc": T_EVENT + f["clear_after_s"],
+                           "xf": f["xf_pu_system_base"], "rf": f["rf_pu_system_base"]})]
     if scenario == "load_step":
         out = []
         for ld in ev["load_step"]["loads"]:
@@ -405,8 +447,64 @@ class OULoads:
 REC = ("a", "v", "Pe", "Qe", "delta", "omega", "tm", "te", "Id", "Iq")
 
 
-def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None):
-    """Fixed-step trapezoidal run on the exact grid k/step_rate; returns every step of REC per machine."""
+def limiters_of(ss, machines):
+    """Every ANDES limiter (HardLimiter, AntiWindup, the limits inside its blocks: flags zu, zl) of
+    the recorded units' exciters and governors: [(tag, kind, model, device uid, limiter name, limiter)]."""
+    from andes.core.discrete import Limiter
+    out = []
+    for m in machines:
+        gov, exc, _ = controls_of(ss, m["andes_idx"])
+        for kind, c in (("exciter", exc), ("governor", gov)):
+            if c is None:
+                continue
+            name, j = c
+            for lname, d in ss.models[name].discrete.items():
+                n = ss.models[name].n  # a limiter that ANDES leaves unevaluated keeps 1 flag
+                if isinstance(d, Limiter) and np.size(getattr(d, "zu", ())) == n == np.size(d.zl):
+                    out.append((m["tag"], kind, name, j, lname, d))
+    return out
+
+
+def limits_reached(watch, flags, step_rate):
+    """{tag: {"<kind> <ANDES model>.<limiter>": {upper/lower: seconds at the limit after the
+    event, first time, at the limit at t = 0}}}: ANDES's own limiter flags, each integration step."""
+    k_ev = int(round(T_EVENT * step_rate))
+    out = {}
+    for w, (tag, kind, name, _, lname, _) in enumerate(watch):
+        for side, col in (("upper", 0), ("lower", 1)):
+            on = flags[:, w, col]
+            after = on[k_ev + 1:]
+            if not after.any():
+                continue
+            first = (k_ev + 1 + int(np.argmax(after))) / step_rate
+            out.setdefault(tag, {})[f"{kind} {name}.{lname} {side}"] = {
+                "seconds_after_event": round(float(after.sum()) / step_rate, 4),
+                "first_s": round(first, 4), "at_t0": bool(on[0])}
+    return out
+
+
+CONTROL_VARS = {"ESST4B": ("PI1_xi", "PI1_ys", "PI1_y", "PI2_y")}
+"""Exciter variables recorded beside the output EFD (``vout``) in ``<event>_controls.csv.gz``."""
+
+
+def controls_of_recorded(ss, machines):
+    """[(column, ANDES variable, device uid)]: each recorded unit's exciter output EFD and
+    CONTROL_VARS (addresses are read once the simulation is initialised)."""
+    out = []
+    for m in machines:
+        _, exc, _ = controls_of(ss, m["andes_idx"])
+        if exc is None:
+            continue
+        name, j = exc
+        mdl = ss.models[name]
+        for var in ("vout",) + CONTROL_VARS.get(name, ()):
+            out.append((f"{m['tag']}/{name}.{var}", getattr(mdl, var), j))
+    return out
+
+
+def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None, watch=(), extra=()):
+    """Fixed-step trapezoidal run on the exact grid k/step_rate; returns every step of REC per machine
+    (and, under "limit_flags", the zu, zl flags of the limiters in ``watch``, see limiters_of)."""
     tds = ss.TDS
     cfg = tds.config
     cfg.tf = t_end + 2.0 / step_rate
@@ -430,10 +528,17 @@ def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None):
     addr += [("y", getattr(ss.GENROU, n).a[gu]) for n in ("tm", "te", "Id", "Iq")]
     n_steps = int(round(cfg.tf * step_rate))
     buf = np.full((n_steps + 1, len(REC), len(machines)), np.nan)
+    flags = np.zeros((n_steps + 1, len(watch), 2), dtype=bool)
+    ext = np.full((n_steps + 1, len(extra)), np.nan)
+    extra = [(c, "x" if v.v_code == "x" else "y", v.a[j]) for c, v, j in extra]
 
     def grab(k):
         for j, (kind, a) in enumerate(addr):
             buf[k, j] = (ss.dae.x if kind == "x" else ss.dae.y)[a]
+        for c, (_, kind, a) in enumerate(extra):
+            ext[k, c] = (ss.dae.x if kind == "x" else ss.dae.y)[a]
+        for w, (*_, j, _, lim) in enumerate(watch):
+            flags[k, w] = lim.zu[j] > 0.5, lim.zl[j] > 0.5
 
     grab(0)
     if ou is not None:
@@ -452,7 +557,7 @@ def simulate(ss, machines, t_end, step_rate=STEP_RATE, ou=None):
     ok = tds.run(no_summary=True)
     if not ok or np.isnan(buf).any():
         raise RuntimeError("time-domain simulation failed or left steps unrecorded")
-    return {name: buf[:, j, :] for j, name in enumerate(REC)}
+    return {**{name: buf[:, j, :] for j, name in enumerate(REC)}, "limit_flags": flags, "extra": ext}
 
 
 def wrap180(deg):
@@ -956,8 +1061,9 @@ CASES["npcc_xd2_below_xl"] = dict(CASES["npcc"], modify=npcc_xd2_below_xl)
 # * ESST4B: ANDES applies KI and XL to the machine current on the system base: it gets
 #   KI, XL times Sb/MBASE (the .dyr gets the machine-base values, dyn_params converts back).
 #   KI = 0.1, XL = 0.05 (a compound source) so that the conversion matters. TA > 0 (ANDES's lag),
-#   limits wide enough not to be reached (ANDES's PI blocks track their limit, PSS/E's do not
-#   wind up); KG = 0 (ANDES's VG limit VGMAX is not in the PSS/E model).
+#   limits wide enough not to be reached in the line trip and load step (ANDES's PI blocks track
+#   their limit, PSS/E's do not wind up: the bolted fault reaches them, esst4b_pi.py shows the
+#   difference); KG = 0 (ANDES's VG limit VGMAX is not in the PSS/E model).
 # * IEEET1: KE = 1 (nonzero: ANDES reads KE = 0 literally, PSS/E computes it); VRMAX nonzero
 #   (ANDES turns VRMAX = 0 into 999).
 # * ESAC1A: KF = 0 (ANDES computes the rate feedback but does not feed it back), transient gain
@@ -1253,16 +1359,23 @@ def run_case(case, scenarios, verify, step_check):
                 "n_loads": int(ss.PQ.n)}
         else:
             ss = load_case(case, event_models(sc, events))
-            ou, t_end = None, T_EVENT_RUN
+            ou, t_end = None, T_RUN.get(sc, T_EVENT_RUN) if case.endswith("_lib") else T_EVENT_RUN
             desc = {"event_time_s": T_EVENT, **events[sc]}
         mach = [dict(m, uid=ss.GENROU.idx2uid(m["andes_idx"])) for m in machines]
         rate = AMBIENT_STEP_RATE if sc == "ambient" else STEP_RATE
-        sim = simulate(ss, mach, t_end, step_rate=rate, ou=ou)
+        watch = limiters_of(ss, mach) if sc != "ambient" else []
+        extra = controls_of_recorded(ss, mach) if case.endswith("_lib") and sc in T_RUN else []
+        sim = simulate(ss, mach, t_end, step_rate=rate, ou=ou, watch=watch, extra=extra)
         fr = frames(sim, f0, sb, mach, fps, t_end, step_rate=rate)
         keep = [not (sc == "gen_trip" and m["andes_idx"] == events["gen_trip"]["andes_idx"])
                 for m in machines]
         pmu_path = out_dir / f"{sc}.csv.gz"
         write_pmu(pmu_path, fr, mach, keep)
+        if extra:  # the exciters' EFD and CONTROL_VARS at the frames
+            kf = np.arange(0, int(round(t_end * rate)) + 1, rate // fps)
+            write_csv_gz(out_dir / f"{sc}_controls.csv.gz", ["time_s"] + [c[0] for c in extra],
+                         [kf / rate] + [sim["extra"][kf, c] for c in range(len(extra))],
+                         ["%.9f"] + ["%.8g"] * len(extra))
         entry = dict(desc, fps=fps, duration_s=t_end, file=pmu_path.name, integration_step_s=1 / rate,
                      recorded=[m["tag"] for m, k in zip(machines, keep) if k],
                      initial_pq_pu_mbase={m["tag"]: [float(fr["Pe"][0, j] * sb / m["mbase"]),
@@ -1270,6 +1383,8 @@ def run_case(case, scenarios, verify, step_check):
                                                            * sb / m["mbase"])]
                                           for j, m in enumerate(machines) if keep[j]},
                      stats=stats(fr, mach, keep, f0),
+                     **({"andes_limits_reached": limits_reached(watch, sim["limit_flags"], rate)}
+                        if watch else {}),
                      checks=check_consistency(pmu_path, fr, mach, keep))
         if sc == "ambient" and step_check:  # first 60 s again at h = 1/240 s on the same OU path
             ss2 = load_case(case)
@@ -1325,6 +1440,9 @@ def _event_text(sc, e):
         buses = ", ".join(str(ld["bus"]) for ld in e["loads"])
         return (f"loads at bus {buses} x{e['factor']:.4f} (+{e['step_mw_at_pf_voltage']:.1f} MW = 5 % of "
                 f"{e['total_system_load_mw']:.0f} MW) at {e['event_time_s']:g} s, near {e['near_machine']}")
+    if sc == "fault":
+        return (f"bolted fault at bus {e['bus']} ({e['kv']:g} kV, xf {e['xf_pu_system_base']:g} pu) at "
+                f"{e['event_time_s']:g} s, cleared after {e['clear_after_s']:g} s")
     if sc == "gen_trip":
         note = " (recorded in the other files; left out of this one)" if e["recorded_elsewhere"] else ""
         return (f"trip GENROU at bus {e['bus']} id {e['id']} ({e['mbase_mva']:g} MVA, {e['p_mw']:.0f} MW)"

@@ -5,14 +5,17 @@
 The bench cases ``ieee14_lib``, ``npcc_lib`` and ``wecc_lib`` (generate.py: every recorded
 unit's exciter swapped to one of ESST4B, IEEET1, ESAC1A, EXAC1, EXAC2, ESST1A, ESDC1A and every
 second one's governor to IEESGO, with the parameter choices under which ANDES 2.0 and the PSS/E
-library agree stated there; line trip and load step, noise-free, 60 frames/s, 70 s). For every
+library agree stated there; noise-free, 60 frames/s): line trip and load step (70 s), and the
+large events, a generator trip and a bolted three-phase bus fault cleared after 0.1 s (40 s;
+ANDES's limiter flags of every unit's exciter and governor recorded at each integration step,
+and its exciters' EFD, so that the limits reached are shown, not assumed). For every
 recorded unit, as ``playback.py`` does: the unit's own .dyr records read by jaxdse (PSS/E CON
 order; jaxdse's defaults, as ``jaxdse fleet`` reads them), ANDES's terminal voltage imposed, and
-jaxdse's P and Q compared with ANDES's (``playback.scores``): the RMS error over the 70 s [% of
+jaxdse's P and Q compared with ANDES's (``playback.scores``): the RMS error over the recording [% of
 MBASE], the event-window (10-20 s) peak error as a share of the measured peak deviation [%], and
 the same without the 3 frames after a switching step.
 
-Per model (each exciter; IEESGO over the units that carry it): units, recordings, median and
+Per event type and per model (each exciter; IEESGO over the units that carry it): units, recordings, median and
 largest RMS error of P and Q, the largest event-window peak error, against issue 33's targets
 (median <= 0.1 %, every unit <= 0.5 % of MBASE, event-window peak <= 10 % of the peak deviation).
 Writes new_models.json and new_models.md here.
@@ -21,6 +24,7 @@ Writes new_models.json and new_models.md here.
 import argparse
 import json
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -36,7 +40,8 @@ import jaxdse as jd  # noqa: E402
 HERE = Path(__file__).parent
 DATA = HERE / "data"
 CASES = ("ieee14_lib", "npcc_lib", "wecc_lib")
-EVENTS = ("line_trip", "load_step")
+EVENTS = ("line_trip", "load_step", "gen_trip", "fault")
+LARGE_EVENTS = ("gen_trip", "fault")
 MODELS = ("ESST4B", "IEEET1", "ESAC1A", "EXAC1", "EXAC2", "ESST1A", "ESDC1A", "IEESGO")
 SUBSTEPS = 4
 
@@ -47,25 +52,56 @@ def jobs(cases=CASES):
         d = DATA / case
         if not (d / "truth.json").exists():
             raise SystemExit(f"{d}/truth.json missing: run generate.py --case {case} first")
+        if not (d / "truth.json").exists():
+            raise SystemExit(f"{d}/truth.json missing: run generate.py --case {case} first")
         truth = json.loads((d / "truth.json").read_text())
         raw, dyr = jd.read_raw(d / f"{case}.raw"), jd.read_dyr(d / f"{case}.dyr")
         for ev in EVENTS:
+            if not (d / f"{ev}.csv.gz").exists():  # named in the report (not_simulated)
+                out.append(dict(case=case, event=ev, not_simulated=True))
+                continue
             df = pd.read_csv(d / f"{ev}.csv.gz")
             tr = pd.read_csv(d / f"{ev}_truth.csv.gz")
+            limits = truth["scenarios"][ev].get("andes_limits_reached", {})
+            ctl = (pd.read_csv(d / f"{ev}_controls.csv.gz") if (d / f"{ev}_controls.csv.gz").exists()
+                   else None)  # ANDES's exciter outputs (generate.py: the large events)
             for m in truth["machines"]:
                 tag = m["tag"]
+                if f"{tag}/VM" not in df:  # ieee14's gen trip trips a recorded unit
+                    continue
                 um = jd.unit_model(dyr, raw, m["bus"], m["id"])
+                sub = m["exciter"].get("andes_model")  # ESDC1A simulated by ANDES's ESDC2A
+                if sub and ev in LARGE_EVENTS:  # ... played back as ANDES simulates it, too
+                    text = (d / f"{case}.dyr").read_text()
+                    mine = f"{m['bus']} '{m['exciter']['model']}' {m['id']} "
+                    if text.count(mine) != 1:
+                        raise ValueError(f"{case} {tag}: record {mine!r} not found once")
+                    tmp = Path(tempfile.mkdtemp()) / f"{case}.dyr"
+                    tmp.write_text(text.replace(mine, f"{m['bus']} '{sub}' {m['id']} "))
+                    out.append(dict(case=case, event=ev, tag=tag, mbase=m["mbase_mva"],
+                                    model=jd.unit_model(jd.read_dyr(tmp), raw, m["bus"], m["id"]),
+                                    series=pb.series_of(df, tag, m["mbase_mva"]),
+                                    delta=tr[f"{tag}/delta_rad"].to_numpy(), limits=limits.get(tag, {}),
+                                    efd=None, truth_models=(sub, m["governor"]["model"]),
+                                    variant=f"record read as {sub}, the ANDES model simulated"))
                 out.append(dict(case=case, event=ev, tag=tag, model=um, mbase=m["mbase_mva"],
                                 series=pb.series_of(df, tag, m["mbase_mva"]),
                                 delta=tr[f"{tag}/delta_rad"].to_numpy(),
+                                limits=limits.get(tag, {}),
+                                efd=None if ctl is None else next(
+                                    ctl[c].to_numpy() for c in ctl if c.startswith(f"{tag}/")
+                                    and c.endswith(".vout")),
                                 truth_models=(m["exciter"]["model"], m["governor"]["model"])))
     return out
 
 
-def run(settings, cases=CASES):
+def run(settings, cases=CASES, timed=True):
     rows, timing = [], []
     groups = {}
     for j in jobs(cases):
+        if j.get("not_simulated"):
+            rows.append(dict(j, tag=None, structure=None, missing=[f"no {j['event']} recording"]))
+            continue
         if j["model"].unit is None:
             rows.append(dict(case=j["case"], event=j["event"], tag=j["tag"], structure=None,
                              missing=j["model"].missing))
@@ -77,8 +113,9 @@ def run(settings, cases=CASES):
         t0 = time.perf_counter()
         res = jax.block_until_ready(pb.batch(units, ser, settings))
         first = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        res = jax.block_until_ready(pb.batch(units, ser, settings))
+        if timed:
+            t0 = time.perf_counter()
+            res = jax.block_until_ready(pb.batch(units, ser, settings))
         wall = time.perf_counter() - t0
         timing.append(dict(structure="/".join(items[0]["model"].structure), units=len(items),
                            first_call_s=round(first, 2), wall_s=round(wall, 3),
@@ -91,8 +128,13 @@ def run(settings, cases=CASES):
                 raise ValueError(f"{j['case']} {j['tag']}: .dyr {structure} but truth.json "
                                  f"{j['truth_models']}")
             rows.append(dict(case=j["case"], event=j["event"], tag=j["tag"], mbase_mva=j["mbase"],
+                             **({"variant": j["variant"]} if "variant" in j else {}),
                              structure="/".join(structure), exciter=structure[1],
                              governor=structure[3], ok=bool(r.ok), notes=j["model"].notes,
+                             andes_limits_reached=j["limits"],
+                             min_vt_pu=float(np.min(np.asarray(j["series"].v_mag_pu))),
+                             rms_efd_err_pu=None if j["efd"] is None else
+                             float(np.sqrt(np.mean((np.asarray(r.efd_pu) - j["efd"]) ** 2))),
                              **pb.scores(np.asarray(j["series"].t_s), p_meas, q_meas, r, j["delta"],
                                          np.asarray(jd.stack_events([j["series"]]).weight[0]) > 0)))
     return rows, timing
@@ -130,16 +172,50 @@ def model_stats(rows) -> dict:
     return out
 
 
+def _limits_text(lim: dict) -> str:
+    """ANDES limiter flags of a row, shortest form: 'exciter ESAC1A.LA_lim upper 0.31 s'."""
+    return "; ".join(f"{k} {v['seconds_after_event']:g} s" for k, v in lim.items()) or "-"
+
+
+def event_stats(rows) -> dict:
+    """Per event type: recordings, median and largest RMS error of P and Q [% of MBASE], where the
+    largest sits, how many are within TARGET_MAX, and how many reached an ANDES exciter or governor
+    limit after the event."""
+    out = {}
+    for ev in EVENTS:
+        sel = [r for r in rows if r["event"] == ev]
+        if not sel:
+            continue
+        p = np.array([r["rms_P_percent_mbase"] for r in sel])
+        q = np.array([r["rms_Q_percent_mbase"] for r in sel])
+        wp, wq = sel[int(np.argmax(p))], sel[int(np.argmax(q))]
+        lim = [r["andes_limits_reached"] for r in sel]
+        out[ev] = {
+            "recordings": len(sel),
+            "median_rms_P_percent_mbase": float(np.median(p)), "max_rms_P_percent_mbase": float(p.max()),
+            "max_rms_P_at": f"{wp['case']} {wp['tag']}",
+            "median_rms_Q_percent_mbase": float(np.median(q)), "max_rms_Q_percent_mbase": float(q.max()),
+            "max_rms_Q_at": f"{wq['case']} {wq['tag']}",
+            "within_target": int(np.sum(np.maximum(p, q) <= pb.TARGET_MAX)),
+            "exciter_limit_reached": int(sum(any(k.startswith("exciter") for k in d) for d in lim)),
+            "governor_limit_reached": int(sum(any(k.startswith("governor") for k in d) for d in lim)),
+            "min_vt_pu_median": float(np.median([r["min_vt_pu"] for r in sel])),
+            "min_vt_pu_lowest": float(min(r["min_vt_pu"] for r in sel)),
+        }
+    return out
+
+
 def report(doc) -> str:
     s = doc["summary"]
     lines = [
-        "# Issue 33 models against ANDES",
+        "# Issue 33 models against ANDES (line trip, load step, generator trip, bolted fault)",
         "",
         "Written by `experiments/andes_bench/new_models.py` from the bench cases `ieee14_lib`, "
         "`npcc_lib`, `wecc_lib` (`generate.py`: the recorded units' exciters swapped to the PSS/E "
         "library models that ANDES 2.0 has, every second one's governor to IEESGO, with the "
-        "parameter choices under which both agree stated there; line trip and load step, "
-        "noise-free, 60 frames/s, 70 s). Each unit's own .dyr records read by jaxdse (PSS/E CON "
+        "parameter choices under which both agree stated there; line trip, load step, "
+        "generator trip and a bolted three-phase fault cleared after 0.1 s, noise-free, 60 "
+        "frames/s, 70 s). Each unit's own .dyr records read by jaxdse (PSS/E CON "
         "order, the package defaults), ANDES's terminal voltage imposed, P and Q compared "
         f"(diffrax {doc['settings']['solver']}, {doc['settings']['substeps']} steps per frame).",
         "",
@@ -156,8 +232,25 @@ def report(doc) -> str:
         f"{s['played_back']}",
         f"- models meeting every target: {s['models_meeting_targets']} of {len(doc['by_model'])}",
         "",
+        "Per event type (RMS errors over the recording (70 s; 40 s for gen_trip and fault) in % of MBASE; ANDES limits: the recordings in "
+        "which an ANDES limiter flag of the unit's exciter or governor was set after the event, "
+        "from `generate.py`'s record of every integration step; min VT: the terminal voltage's "
+        "lowest frame):",
+        "",
+        "| event | recordings | RMS P median | RMS P largest (where) | RMS Q median | RMS Q largest "
+        "(where) | within 0.5 % | exciter limit reached | governor limit reached | min VT median "
+        "| min VT lowest |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+        *[f"| {ev} | {v['recordings']} | {v['median_rms_P_percent_mbase']:.4f} | "
+          f"{v['max_rms_P_percent_mbase']:.4f} ({v['max_rms_P_at']}) | "
+          f"{v['median_rms_Q_percent_mbase']:.4f} | {v['max_rms_Q_percent_mbase']:.4f} "
+          f"({v['max_rms_Q_at']}) | {v['within_target']} of {v['recordings']} | "
+          f"{v['exciter_limit_reached']} | {v['governor_limit_reached']} | "
+          f"{v['min_vt_pu_median']:.3f} | {v['min_vt_pu_lowest']:.3f} |"
+          for ev, v in doc["by_event"].items()],
+        "",
         "Per model (exciters by the units that carry them; IEESGO by the units that carry it, "
-        "whatever their exciter). RMS errors over the 70 s in % of MBASE; event-window peak error "
+        "whatever their exciter). RMS errors over the recording (70 s; 40 s for gen_trip and fault) in % of MBASE; event-window peak error "
         "in % of the peak deviation from the pre-event value, the larger of P and Q:",
         "",
         "| model | units | recordings | RMS P median | RMS P largest | RMS Q median | RMS Q largest "
@@ -175,22 +268,53 @@ def report(doc) -> str:
             f"{'yes' if v['meets_targets'] else 'no'} |")
     lines += ["", "| case | event | unit | MBASE [MVA] | models (machine/exciter/PSS/governor) | "
               "RMS P [%] | RMS Q [%] | peak err P [% of dev] | peak err Q [% of dev] | "
-              "max angle err [deg] |", "|---|---|---|---|---|---|---|---|---|---|"]
+              "max angle err [deg] | min VT [pu] | RMS EFD err [pu] | ANDES limits reached "
+              "(after the event) |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in doc["rows"]:
         if not r.get("structure"):
-            lines.append(f"| {r['case']} | {r['event']} | {r['tag']} | | not played back: "
-                         f"{'; '.join(r['missing'])} | | | | | |")
+            lines.append(f"| {r['case']} | {r['event']} | {r['tag'] or '-'} | | not played back: "
+                         f"{'; '.join(r['missing'])} | | | | | | | | |")
             continue
         lines.append(f"| {r['case']} | {r['event']} | {r['tag']} | {r['mbase_mva']:g} | "
                      f"{r['structure']} | {r['rms_P_percent_mbase']:.4f} | "
                      f"{r['rms_Q_percent_mbase']:.4f} | {r['event_peak_err_P_percent_of_dev']:.2f} | "
-                     f"{r['event_peak_err_Q_percent_of_dev']:.2f} | {r['max_angle_err_deg']:.3f} |")
-    lines += ["", "Cost per structure (one vmapped call; wall: the second call):", "",
+                     f"{r['event_peak_err_Q_percent_of_dev']:.2f} | {r['max_angle_err_deg']:.3f} | "
+                     f"{r['min_vt_pu']:.3f} | "
+                     f"{'-' if r['rms_efd_err_pu'] is None else format(r['rms_efd_err_pu'], '.4f')} | "
+                     f"{_limits_text(r['andes_limits_reached'])} |")
+    lines += ["", ("Cost per structure (one vmapped call; wall: the second call):" if doc.get("timed", True) else
+               "Cost per structure (one vmapped call, --no-timing: wall = the first call, compile included):"), "",
               "| structure | units | first call incl. compile [s] | wall [s] | per unit [s] |",
               "|---|---|---|---|---|"]
     for t in doc["timing"]:
         lines.append(f"| {t['structure']} | {t['units']} | {t['first_call_s']} | {t['wall_s']} | "
                      f"{t['per_unit_s']} |")
+    if doc["as_andes_simulates"]:
+        lines += ["", "ESDC1A units of the large events played back a second time with their record read "
+                  "as the ANDES model that simulated them (ESDC2A: ANDES 2.0's ESDC1A holds VR at 0, "
+                  "generate.py; IEEE DC2A = DC1A with the VR limits times VT, so the two differ only "
+                  "where VR reaches a limit):", "",
+                  "| case | event | unit | RMS P [%] | RMS Q [%] | ANDES limits reached |",
+                  "|---|---|---|---|---|---|"]
+        for r in doc["as_andes_simulates"]:
+            lines.append(f"| {r['case']} | {r['event']} | {r['tag']} | {r['rms_P_percent_mbase']:.4f} | "
+                         f"{r['rms_Q_percent_mbase']:.4f} | {_limits_text(r['andes_limits_reached'])} |")
+    pi = HERE / "esst4b_pi.json"  # experiments/andes_bench/esst4b_pi.py (SciPy, the block diagram)
+    if pi.exists():
+        e = json.loads(pi.read_text())
+        lines += ["", f"ESST4B after the {e['event']} (`esst4b_pi.py`): the outer PI "
+                  "regulator driven by ANDES's own terminal voltage, integrated by SciPy from the "
+                  "block diagram both ways, against ANDES's recorded VR (RMS over the frames after "
+                  "the event, and the value at the end):", "",
+                  "| unit | frames on a VR limit (ANDES) | PSS/E non-windup PI: RMS err, final VR | "
+                  f"tracking anti-windup (ANDES, ks = {e['ks_andes']:g}): RMS err, final VR | "
+                  "ANDES final VR |", "|---|---|---|---|---|"]
+        for tag, u in e["units"].items():
+            nw, tr = u["nonwindup"], u["tracking"]
+            lines.append(f"| {tag} | {u['andes_frames_on_a_vr_limit']} | "
+                         f"{nw['rms_err_vs_andes_pu']:.4f}, {nw['final_vr_pu']:.4f} | "
+                         f"{tr['rms_err_vs_andes_pu']:.4f}, {tr['final_vr_pu']:.4f} | "
+                         f"{u['andes_final_vr_pu']:.4f} |")
     lines += ["", f"Script wall time: {doc['wall_s']:.0f} s ({doc['machine']})."]
     return "\n".join(lines) + "\n"
 
@@ -199,15 +323,21 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--case", nargs="+", choices=CASES, default=list(CASES),
                     help="a subset, for a quick look (the files written then hold only it)")
+    ap.add_argument("--no-timing", action="store_true",
+                    help="one call per structure (the wall time then includes the compilation)")
     args = ap.parse_args()
     t_start = time.perf_counter()
     settings = jd.PlaybackSettings(substeps=SUBSTEPS)
-    rows, timing = run(settings, args.case)
+    rows, timing = run(settings, args.case, timed=not args.no_timing)
+    variants = [r for r in rows if "variant" in r]  # ANDES's model, not the record's: apart
+    rows = [r for r in rows if "variant" not in r]
     done = [r for r in rows if r.get("structure")]
     by_model = model_stats(done)
+    by_event = event_stats(done)
     summary = {
-        "machine_recordings": len(rows), "played_back": len(done),
-        "units": len({(r["case"], r["tag"]) for r in rows}),
+        "machine_recordings": sum(r["tag"] is not None for r in rows), "played_back": len(done),
+        "units": len({(r["case"], r["tag"]) for r in rows if r["tag"] is not None}),
+        "not_simulated": [f"{r['case']} {r['event']}" for r in rows if r.get("not_simulated")],
         "median_rms_P_percent_mbase": float(np.median([r["rms_P_percent_mbase"] for r in done])),
         "median_rms_Q_percent_mbase": float(np.median([r["rms_Q_percent_mbase"] for r in done])),
         "max_rms_P_percent_mbase": float(np.max([r["rms_P_percent_mbase"] for r in done])),
@@ -222,12 +352,12 @@ def main():
                         "ke_zero": "psse (package default)"},
            "targets": {"median_rms_percent_mbase": pb.TARGET_MEDIAN, "max_rms_percent_mbase": pb.TARGET_MAX,
                        "event_peak_percent_of_dev": pb.TARGET_PEAK},
-           "summary": summary, "by_model": by_model, "timing": timing, "rows": rows,
+           "timed": not args.no_timing, "summary": summary, "by_event": by_event, "by_model": by_model, "as_andes_simulates": variants, "timing": timing, "rows": rows,
            "machine": f"{jax.devices()[0].platform}, {len(__import__('os').sched_getaffinity(0))} cores",
            "wall_s": time.perf_counter() - t_start}
     (HERE / "new_models.json").write_text(json.dumps(doc, indent=1) + "\n")
     (HERE / "new_models.md").write_text(report(doc))
-    print(json.dumps({"summary": summary, "by_model": {m: {k: v[k] for k in (
+    print(json.dumps({"timed": not args.no_timing, "summary": summary, "by_event": by_event, "by_model": {m: {k: v[k] for k in (
         "n_units", "median_rms_P_percent_mbase", "max_rms_P_percent_mbase", "median_rms_Q_percent_mbase",
         "max_rms_Q_percent_mbase", "max_event_peak_err_percent_of_dev", "meets_targets")}
         for m, v in by_model.items()}}, indent=1))

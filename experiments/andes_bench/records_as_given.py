@@ -33,7 +33,6 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxdse as jd  # noqa: E402
-from jaxdse._core.verdict import NOTES  # noqa: E402
 
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE))  # playback.py's helpers
@@ -102,7 +101,7 @@ def fleet_rows(tmp: Path) -> list[dict]:
 
 def _only_simplified(r: dict) -> bool:
     """Identified but for ``model_simplified`` (or identified as it is)."""
-    decisive = set(r["reasons"]) - set(NOTES)
+    decisive = set(r["reasons"]) - set(jd.VERDICT_NOTES)
     return r["verdict"] == "identified" or (r["verdict"] == "weakly identified"
                                             and decisive == {"model_simplified"})
 

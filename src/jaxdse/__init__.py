@@ -52,6 +52,7 @@ from ._core.settings import Settings as Settings
 from ._core.tuning import LossWeights as LossWeights
 from ._core.verdict import D_MEANING as D_MEANING
 from ._core.verdict import D_VERDICTS as D_VERDICTS
+from ._core.verdict import NOTES as VERDICT_NOTES  # reasons that leave H's verdict alone
 from ._core.verdict import VERDICTS as VERDICTS
 from ._core.verdict import Verdict as Verdict
 from ._core.verdict import VerdictSettings as VerdictSettings
