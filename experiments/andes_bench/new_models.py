@@ -52,8 +52,6 @@ def jobs(cases=CASES):
         d = DATA / case
         if not (d / "truth.json").exists():
             raise SystemExit(f"{d}/truth.json missing: run generate.py --case {case} first")
-        if not (d / "truth.json").exists():
-            raise SystemExit(f"{d}/truth.json missing: run generate.py --case {case} first")
         truth = json.loads((d / "truth.json").read_text())
         raw, dyr = jd.read_raw(d / f"{case}.raw"), jd.read_dyr(d / f"{case}.dyr")
         for ev in EVENTS:

@@ -17,8 +17,11 @@ structure: one compile, and one more for Kvaerno5.
 import json
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import pytest
+
+import jaxdse as jd
 
 from jaxdse._app.check import load_case
 from jaxdse._app.cli import main
@@ -291,3 +294,25 @@ def test_a_group_past_its_limit_is_marked_and_the_check_goes_on(tmp_path, monkey
         assert units[n]["outcome"] == "fail"
         assert units[n]["reasons"][0].startswith("timed out after 0 s waiting for group GENROU ESST3A - "
                                                  "TGOV1 (3 unit(s), tsit5)"), units[n]["reasons"]
+
+
+def test_no_lapack_call_in_the_check_programs():
+    """The check's vmapped programs hold no LAPACK custom call: with one (``eigvals`` of the
+    Jacobian, Kvaerno5's LU) inside, two groups run side by side wedged XLA's CPU runtime (both
+    threads in BlockUntilReady, every XLA thread idle): Nordic 44 with a warm compilation cache
+    hung in 8 of 9 runs, and in 0 of 9 without. The eigenvalues are taken on the host; the
+    implicit solver's Newton steps use an unrolled LU (``jaxdse._dyr.stiff``)."""
+    from jaxdse._app import check as ck
+    from jaxdse._io.psse import read_dyr, read_raw
+
+    raw, dyr = read_raw(BENCH / "ieee14.raw"), read_dyr(BENCH / "ieee14.dyr")
+    g = next(g for g in raw.generators if g.bus == 1)
+    unit = jd.unit_model(dyr, raw, g.bus, g.id).unit
+    whole = ck._batch_jit().lower(ck._stack([unit]), ck._stack([ck._lane(raw, g, 0.0)]),
+                                  ck._Run(end_s=2.0)).as_text()
+    implicit = ck._Run(solver="kvaerno5", end_s=0.2)
+    stiff = jax.jit(jax.vmap(lambda y: ck._integrate(lambda t, x, a: -3000.0 * x + jnp.sin(x), y,
+                                                     implicit, 4)[0])).lower(jnp.ones((2, 3))).as_text()
+    for text in (whole, stiff):
+        for call in ("lapack", "getrf", "geev", "gesdd", "trsm"):
+            assert call not in text.lower(), call
