@@ -300,8 +300,8 @@ def test_no_lapack_call_in_the_check_programs():
     """The check's vmapped programs hold no LAPACK custom call: with one (``eigvals`` of the
     Jacobian, Kvaerno5's LU) inside, two groups run side by side wedged XLA's CPU runtime (both
     threads in BlockUntilReady, every XLA thread idle): Nordic 44 with a warm compilation cache
-    hung in 10 of 11 runs of the old code, and in 0 of 8 of this one. The eigenvalues are taken on the host; the
-    implicit solver's Newton steps use an unrolled LU (``jaxdse._dyr.stiff``)."""
+    hung in 10 of 11 runs of the old code, and in 0 of 8 of this one. The eigenvalues are taken
+    on the host; the implicit solver's Newton steps use an unrolled LU (``jaxdse._dyr.stiff``)."""
     from jaxdse._app import check as ck
     from jaxdse._io.psse import read_dyr, read_raw
 
