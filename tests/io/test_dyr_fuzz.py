@@ -201,7 +201,7 @@ DAMAGE = {
                               "IEEEG3 on bus 2 id '1' (case.dyr line 2): governor model not modelled by "
                               "jaxdse; constant mechanical torque"),
     "governor invalid": (lambda c: _const(c, 1, "T3", "0"), "B2_G1", "skip",
-                         "case.dyr, row 2: TGOV1 bus 2 id '1': TGOV1.t3_s must be > 0"),
+                         "case.dyr, row 2: TGOV1 bus 2 id '1': T3 must be > 0"),
     "MBASE NaN": (lambda c: c.gens[1].__setitem__(MBASE, "nan"), "B3_G1", "skip",
                   "case.raw, row 13: generator record: field 9 (MBASE) is not a number: 'nan'"),
     "MBASE zero": (lambda c: c.gens[1].__setitem__(MBASE, "0"), "B3_G1", "skip",

@@ -525,7 +525,7 @@ def test_governor_from_dyr(tmp_path):
     assert isinstance(g, GAST) and float(g.dturb_pu) == 0.2 and float(g.kt_pu) == 2.0
     h = psse.governor_from_dyr(dyr.governor(1, "3"))
     assert isinstance(h, HYGOV) and float(h.tg_s) == 20.5 and float(h.r_temp_pu) == 0.075
-    with pytest.raises(jd.InputError, match=r"g.dyr, row 4: TGOV1 bus 1 id '4': TGOV1.t3_s must be > 0"):
+    with pytest.raises(jd.InputError, match=r"g.dyr, row 4: TGOV1 bus 1 id '4': T3 must be > 0"):
         psse.governor_from_dyr(dyr.governor(1, "4"))
     with pytest.raises(jd.InputError, match=r"row 5: GGOV1 bus 1 id '5': Trate > 0 needs the machine's MBASE"):
         psse.governor_from_dyr(dyr.governor(1, "5"))
