@@ -53,7 +53,12 @@ signal with its value and the CON with its value are named); ``"not supported"``
 model jaxdse does not simulate, named); ``"fail"`` (every record simulated and every value
 check passed, but the unit does not start steady or does not settle: the reasons give the
 numbers; a model limitation, an unstable tuning, or a jaxdse bug). Units of one model
-structure run in one vmapped, jitted call.
+structure run in one vmapped, jitted call, with no LAPACK call inside (the modes are taken on
+the host); a unit whose fastest mode at rest the fixed explicit step cannot follow is run again
+with Kvaerno5 and noted (:mod:`jaxdse._dyr.stiff`), so a stiff record is never a data problem.
+Every wait on a group is bounded (:mod:`jaxdse._many.waits`). With ``repair``, each data
+problem that is a crossed limit gets the smallest change of its CON (:mod:`jaxdse._dyr.repair`,
+written out by :mod:`jaxdse._app.repair`).
 """
 
 from __future__ import annotations
