@@ -267,6 +267,29 @@ def block() -> str:
                    f"recordings {h['default (Table I)']['median_convergence_time_s']:.0f} s -> "
                    f"{h['tuned']['median_convergence_time_s']:.0f} s "
                    f"({tune['median_convergence_speedup']:.1f}x).")
+    checks = [(name, load(f"experiments/{folder}/check.json"))
+              for name, folder in (("ACTIVSg2000", "activsg2000"), ("Nordic 44 (ANDES's case)", "nordic44"))]
+    parts = []
+    for name, doc in checks:
+        if doc is None:
+            continue
+        c, a = doc["summary"], doc["summary"].get("accounting")
+        text = (f"{name}: {c['pass']} of {c['units']} units pass, {c['data problem']} data problem, "
+                f"{c['not supported']} not supported, {c['fail']} fail")
+        if a:
+            left = ", ".join(f"{a[k]} {k}" for k in ("out of service", "no dynamic records", "converter",
+                                                    "not a generator", "duplicate") if a.get(k))
+            text += f" (of {a['generator_records']} generator records: {a['checked']} checked" + \
+                (f", {left}" if left else "") + ")"
+        parts.append(text)
+    fixed = load("experiments/activsg2000/repaired/check.json")
+    repairs = ROOT / "experiments/activsg2000/repairs.csv"
+    if fixed and repairs.exists():
+        n = len(repairs.read_text().splitlines()) - 1
+        parts.append(f"ACTIVSg2000 with `--repair`: {n} constants changed (`experiments/activsg2000/repairs.csv`), "
+                     f"then {fixed['summary']['pass']} of {fixed['summary']['units']} pass")
+    if parts:
+        out.append("- **Case checks** (`jaxdse check`, `experiments/*/check.json`): " + "; ".join(parts) + ".")
     return "\n".join(out)
 
 
