@@ -99,7 +99,8 @@ from .._io.psse import (
     record_label,
 )
 from .._io.schema import build, no_unknown, options, read_toml, subtable
-from .._many.waits import Expired, Task, bounded, executing
+from .._many.runner import _same_context_in_threads, threads
+from .._many.waits import COMPILE_LIMIT_S, Expired, Task, bounded, executing
 from .._models.exciters import EXCITERS
 from .._models.governors import GOVERNORS
 from .._models.machines import MACHINES
@@ -640,9 +641,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
     bar = Progress(len(groups)) if progress is True else None
     report = progress if callable(progress) else (bar.step if bar is not None else (lambda _: None))
     order = sorted(groups.values(), key=len, reverse=True)
-    n_workers = workers or _threads(len(order))
-    from .._many.runner import _same_context_in_threads
-
+    n_workers = workers or threads(len(order))
     in_threads = _same_context_in_threads()
     done: dict = {}
     """unit index -> (held lane, step lane, the _Run it was integrated with)"""
@@ -790,9 +789,6 @@ def _accounting_lines(doc: dict, most: int = 5) -> list[str]:
     return lines
 
 
-COMPILE_LIMIT_S = 1800.0
-"""The wait on one group's compile [s]: Kvaerno5's took 41 s of CPU and 143 s of wall time on 2
-cores loaded 7-fold (a unit of GENROU ESST3A TGOV1), Tsit5's 6 s and 22 s."""
 WAIT_BASE_S = 60.0
 """The wait on one group's compiled run: this much [s] ..."""
 WAIT_PER_LANE_STEP_S = 2e-4
@@ -808,13 +804,6 @@ def wait_limit_s(units: int, spec: CheckSpec, solver: str, substeps: int) -> flo
     frames = int(round(spec.end_s * spec.frame_hz))
     steps = frames * (substeps if solver == "tsit5" else 8)
     return WAIT_BASE_S + WAIT_PER_LANE_STEP_S * 2 * units * steps
-
-
-def _threads(groups: int) -> int:
-    from .._many.runner import _same_context_in_threads, cores
-
-    n = max(1, min(groups, cores()))
-    return n if n == 1 or _same_context_in_threads() else 1
 
 
 def _chain(e: dict) -> str:

@@ -30,7 +30,7 @@ from .._dyr.records import UnitModel, unit_model
 from .._dyr.stiff import modes, stiff_note, too_stiff
 from .._many import programs
 from .._many.runner import _same_context_in_threads, threads
-from .._many.waits import Expired, Task, bounded
+from .._many.waits import COMPILE_LIMIT_S, Expired, Task, bounded
 from .._models.exciters import EXCITERS
 from .._models.stabilisers import STABILISERS
 
@@ -188,8 +188,6 @@ def _starts(units, series, settings):
     return (eqx.filter_vmap(_start, in_axes=(0, 0, None))(units, series, settings),)
 
 
-COMPILE_LIMIT_S = 1800.0
-"""The wait on one call's compile [s] (minutes on a loaded machine: ``jaxdse._app.check``)."""
 WAIT_BASE_S = 60.0
 """The wait on one call of the playback, once compiled: this much [s] ..."""
 WAIT_PER_UNIT_FRAME_S = 2e-3
