@@ -301,7 +301,7 @@ def test_no_lapack_call_in_the_check_programs():
     Jacobian, Kvaerno5's LU) inside, two groups run side by side wedged XLA's CPU runtime (both
     threads in BlockUntilReady, every XLA thread idle): Nordic 44 with a warm compilation cache
     hung in 10 of 11 runs of the old code, and in 0 of 8 of this one. The eigenvalues are taken
-    on the host; the implicit solver's Newton steps use an unrolled LU (``jaxdse._dyr.stiff``)."""
+    on the host; the implicit solver's Newton steps use a plain-arithmetic LU (``jaxdse._dyr.stiff``)."""
     from jaxdse._app import check as ck
     from jaxdse._io.psse import read_dyr, read_raw
 

@@ -395,7 +395,7 @@ def _integrate(rhs, y0, run: _Run, n: int):
                               saveat=diffrax.SaveAt(ts=np.arange(n) / run.frame_hz),
                               stepsize_controller=diffrax.PIDController(rtol=1e-7, atol=1e-9,
                                                                         jump_ts=[run.step_at_s]),
-                              max_steps=64 * n, throw=False)
+                              max_steps=64 * n, throw=False, adjoint=diffrax.ForwardMode())
     return sol.ys, sol.result == diffrax.RESULTS.successful
 
 

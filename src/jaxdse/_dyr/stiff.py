@@ -9,8 +9,8 @@ thread-pool deadlocks seen in this project).
 
 Kvaerno5's Newton iterations solve a small linear system per stage; diffrax's default goes through
 lineax's LU, i.e. LAPACK ``getrf``/``trsm`` custom calls, batched under vmap. :func:`kvaerno5`
-is the same solver with :class:`UnrolledLU`: Gaussian elimination with partial pivoting written
-as plain array arithmetic, unrolled over the (fixed, small: a unit has 5-30 states) dimension.
+is the same solver with :class:`PlainLU`: Gaussian elimination with partial pivoting written
+as plain array arithmetic in loops over the (small: a unit has 5-30 states) dimension.
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ from typing import Any
 import diffrax
 import equinox.internal as eqxi
 import jax.numpy as jnp
+from jax import lax
 import lineax as lx
 import numpy as np
 from lineax._solver.misc import pack_structures, ravel_vector, transpose_packed_structures, unravel_solution
@@ -32,22 +33,21 @@ about this (Tsit5's and Dormand-Prince's stability region on the negative real a
 
 def _factor(a):
     """(LU with unit lower triangle packed, row order) of the square matrix ``a`` by Gaussian
-    elimination with partial pivoting; plain arithmetic, unrolled over the rows."""
-    n = a.shape[0]
-    rows = jnp.arange(n)
-    order = rows
-    for k in range(n):
-        col = jnp.where(rows >= k, jnp.abs(a[:, k]), -1.0)
-        p = jnp.argmax(col)
+    elimination with partial pivoting; plain arithmetic in a loop over the rows (one traced
+    step, whatever the size: a program compiles in seconds, not minutes)."""
+    rows = jnp.arange(a.shape[0])
+
+    def step(k, carry):
+        a, order = carry
+        p = jnp.argmax(jnp.where(rows >= k, jnp.abs(a[:, k]), -1.0))
         swap = jnp.where(rows == k, p, jnp.where(rows == p, k, rows))   # exchange rows k and p
-        a = a[swap]
-        order = order[swap]
+        a, order = a[swap], order[swap]
         pivot = a[k, k]
-        safe = jnp.where(pivot == 0, 1.0, pivot)
-        factor = jnp.where(rows > k, a[:, k] / safe, 0.0)
+        factor = jnp.where(rows > k, a[:, k] / jnp.where(pivot == 0, 1.0, pivot), 0.0)
         a = a - factor[:, None] * jnp.where(rows[None, :] > k, a[k][None, :], 0.0)
-        a = a.at[:, k].set(jnp.where(rows > k, factor, a[:, k]))
-    return a, order
+        return jnp.where((rows[None, :] == k) & (rows[:, None] > k), factor[:, None], a), order
+
+    return lax.fori_loop(0, a.shape[0], step, (a, rows))
 
 
 def _solve(lu, order, b):
@@ -56,24 +56,27 @@ def _solve(lu, order, b):
     if n == 0:
         return b
     b = b[order]
-    y = []
-    for i in range(n):   # forward: unit lower triangle
-        y.append(b[i] - sum((lu[i, j] * y[j] for j in range(i)), start=jnp.zeros_like(b[i])))
-    x = [None] * n
-    for i in reversed(range(n)):   # back: upper triangle
-        s = y[i] - sum((lu[i, j] * x[j] for j in range(i + 1, n)), start=jnp.zeros_like(b[i]))
-        x[i] = s / lu[i, i]
-    return jnp.stack(x)
+    rows = jnp.arange(n)
+
+    def forward(i, y):   # unit lower triangle
+        return y.at[i].set(b[i] - jnp.sum(jnp.where(rows < i, lu[i] * y, 0.0)))
+
+    def back(k, x):      # upper triangle, from the last row
+        i = n - 1 - k
+        return x.at[i].set((y[i] - jnp.sum(jnp.where(rows > i, lu[i] * x, 0.0))) / lu[i, i])
+
+    y = lax.fori_loop(0, n, forward, jnp.zeros_like(b))
+    return lax.fori_loop(0, n, back, jnp.zeros_like(b))
 
 
-class UnrolledLU(lx.AbstractLinearSolver):
+class PlainLU(lx.AbstractLinearSolver):
     """lineax's LU solver without LAPACK: :func:`_factor` and :func:`_solve` in plain
     arithmetic (square, nonsingular operators of a few tens of rows)."""
 
     def init(self, operator, options: dict[str, Any]):
         del options
         if operator.in_size() != operator.out_size():
-            raise ValueError("UnrolledLU needs a square operator")
+            raise ValueError("PlainLU needs a square operator")
         matrix = operator.as_matrix()
         return _factor(matrix), matrix, pack_structures(operator), eqxi.Static(False)
 
@@ -98,8 +101,8 @@ class UnrolledLU(lx.AbstractLinearSolver):
 
 def kvaerno5() -> diffrax.Kvaerno5:
     """diffrax's Kvaerno5 (implicit, L-stable, 5th order) whose Newton iterations solve with
-    :class:`UnrolledLU` (no LAPACK custom call in the vmapped program)."""
-    chord = diffrax.with_stepsize_controller_tols(diffrax.VeryChord)(linear_solver=UnrolledLU())
+    :class:`PlainLU` (no LAPACK custom call in the vmapped program)."""
+    chord = diffrax.with_stepsize_controller_tols(diffrax.VeryChord)(linear_solver=PlainLU())
     return diffrax.Kvaerno5(root_finder=chord)
 
 
@@ -134,4 +137,4 @@ def stiff_note(fastest_per_s: float, step_s: float, explicit: str) -> str:
             "integrated with Kvaerno5 (implicit, adaptive)")
 
 
-__all__ = ["EXPLICIT_LIMIT", "UnrolledLU", "kvaerno5", "modes", "stiff_note", "too_stiff"]
+__all__ = ["EXPLICIT_LIMIT", "PlainLU", "kvaerno5", "modes", "stiff_note", "too_stiff"]
