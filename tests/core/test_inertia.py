@@ -1,0 +1,118 @@
+"""System inertia per area (jaxdse._core.inertia): exact sums on hand-made fleets, the
+interval's coverage by Monte Carlo, and no NaN where an area has no online unit."""
+
+import math
+
+import numpy as np
+import pytest
+
+from jaxdse._core.inertia import InertiaSettings, InertiaUnit, Z95, area_inertia
+
+
+def _fleet():
+    return [
+        InertiaUnit("g1", "north", 100.0, True, h_model_s=5.0, h_s=4.0, h_ci95=(3.8, 4.4), age_s=0.0,
+                    measured=True),
+        InertiaUnit("g2", "north", 200.0, True, h_model_s=3.0),
+        InertiaUnit("g3", "north", 50.0, False, h_model_s=6.0),                     # offline
+        InertiaUnit("w1", "north", 80.0, True, kind="ibr_following"),
+        InertiaUnit("g4", "south", 300.0, True, h_model_s=4.0, h_s=4.5, h_ci95=(4.0, 5.0), age_s=40.0,
+                    measured=True),                                                  # stale
+        InertiaUnit("f1", "south", 100.0, True, kind="grid_forming", h_model_s=2.0),
+    ]
+
+
+def test_exact_sums_on_a_hand_made_fleet():
+    s = InertiaSettings(model_uncertainty=0.1, largest_loss_mw=1000.0, f0_hz=50.0, stale_s=30.0,
+                        floor_MWs=1500.0)
+    rows, units = area_inertia(_fleet(), s, areas=["north", "south", "east"])
+    north, south, east, system = rows
+    assert [r.area for r in rows] == ["north", "south", "east", "system"]
+    # north: 4*100 measured + 3*200 model; g3 offline; w1 0
+    assert north.E_MWs == pytest.approx(1000.0)
+    assert north.E_measured_MWs == pytest.approx(400.0) and north.measured_share == pytest.approx(0.4)
+    assert north.E_commitment_MWs == pytest.approx(5 * 100 + 3 * 200)
+    assert north.E_ci95[0] == pytest.approx(1000 - math.hypot(20.0, 60.0))
+    assert north.E_ci95[1] == pytest.approx(1000 + math.hypot(40.0, 60.0))
+    assert north.units_online == 3 and north.units_measured == 1 and north.below_floor is True
+    assert north.rocof_hz_per_s == pytest.approx(50 * 1000 / 2000)
+    assert north.rocof_ci95[0] == pytest.approx(25000 / north.E_ci95[1])
+    # south: g4 stale -> its model 4*300; f1 virtual 2*100
+    assert south.E_MWs == pytest.approx(1400.0) and south.measured_share == 0.0
+    assert south.units_measured == 0 and south.units_stale == 1
+    assert south.E_ci95[1] - 1400 == pytest.approx(math.hypot(120.0, 20.0))
+    by = {u.name: u for u in units}
+    assert by["g4"].source == "model (stale)" and by["g1"].source == "measured"
+    assert by["g3"].source == "offline" and by["w1"].source == "ibr_following" and by["f1"].source == "model"
+    # an area without units: E = 0, no NaN, RoCoF None with its reason
+    assert east.E_MWs == 0.0 and east.E_ci95 == (0.0, 0.0) and east.measured_share is None
+    assert east.rocof_hz_per_s is None and east.rocof_reason == "no online unit" and east.units_online == 0
+    assert system.E_MWs == pytest.approx(2400.0) and system.E_measured_MWs == pytest.approx(400.0)
+    assert system.E_commitment_MWs == pytest.approx(1100 + 1400)
+    assert system.E_ci95[1] - 2400 == pytest.approx(math.sqrt(40**2 + 60**2 + 120**2 + 20**2))
+    assert system.units_online == 5 and system.below_floor is False
+    line = system.line(1.0)
+    assert list(line) == ["t", "area", "E_MWs", "E_ci95", "measured_share", "E_commitment_MWs",
+                          "rocof_hz_per_s", "units_online", "units_measured"]
+
+
+def test_no_online_unit_and_no_loss_configured():
+    s = InertiaSettings()
+    rows, _ = area_inertia([InertiaUnit("g", "a", 100.0, False, h_model_s=5.0),
+                            InertiaUnit("w", "b", 100.0, True, kind="ibr_following")], s)
+    for r in rows:
+        assert r.E_MWs == 0.0 and r.measured_share is None and r.rocof_hz_per_s is None
+        assert all(math.isfinite(x) for x in r.E_ci95)
+    assert rows[0].rocof_reason == "no largest_loss_mw configured"
+    s = InertiaSettings(largest_loss_mw=100.0)
+    rows, _ = area_inertia([InertiaUnit("w", "b", 100.0, True, kind="ibr_following")], s)
+    assert rows[0].rocof_reason.startswith("no stored kinetic energy")
+    # an online unit the case gives no H: 0, counted apart
+    rows, units = area_inertia([InertiaUnit("x", "a", 100.0, True, h_model_s=None)], s)
+    assert units[0].source == "no H record" and rows[0].units_without_h == 1 and rows[0].E_MWs == 0.0
+
+
+def test_a_measured_h_without_interval_is_not_used():
+    rows, units = area_inertia([InertiaUnit("g", "a", 100.0, True, h_model_s=5.0, h_s=9.0, h_ci95=None,
+                                            age_s=0.0, measured=True)], InertiaSettings())
+    assert units[0].source == "model (no interval)" and rows[0].E_MWs == pytest.approx(500.0)
+
+
+@pytest.mark.parametrize("asymmetric", [False, True])
+def test_interval_covers_95_percent(asymmetric):
+    """Monte Carlo: a fleet of 40 units (measured and model) with known true H; each draw gives
+    every unit an error inside its stated uncertainty (normal, or split normal with the
+    stated lower and upper half-widths), the estimate is truth + error, and E's interval is
+    built from the estimates' stated intervals. It covers the true E in 95 % of draws (a linear
+    sum of the unit half-widths would cover ~100 %, the largest one alone far less)."""
+    rng = np.random.default_rng(0)
+    n, draws = 40, 4000
+    s_mva = rng.uniform(50, 800, n)
+    h_true = rng.uniform(2, 8, n)
+    measured = np.arange(n) < 25
+    rel = 0.15
+    rel_lo = rng.uniform(0.03, 0.2, n)                      # measured units' relative half-widths
+    rel_hi = rng.uniform(0.03, 0.2, n) if asymmetric else rel_lo
+    settings = InertiaSettings(model_uncertainty=rel)
+    covered = 0
+    e_true = float(np.sum(h_true * s_mva))
+    for _ in range(draws):
+        z = rng.standard_normal(n)
+        # split normal around the truth: sigma_lo below, sigma_hi above (estimate = truth + error);
+        # the estimate's stated interval is [est (1 - rel_hi), est (1 + rel_lo)] so that the
+        # truth lies below it by the lower half-width when the error was positive
+        err = np.where(z < 0, z * rel_hi, z * rel_lo) * h_true / Z95
+        est = h_true + err
+        units = []
+        for k in range(n):
+            if measured[k]:
+                units.append(InertiaUnit(f"u{k}", "a", s_mva[k], True, h_model_s=h_true[k], h_s=est[k],
+                                         h_ci95=(est[k] - rel_lo[k] * h_true[k], est[k] + rel_hi[k] * h_true[k]),
+                                         age_s=0.0, measured=True))
+            else:   # filed H with a model error of the stated relative uncertainty
+                filed = h_true[k] * (1 + rel * rng.standard_normal() / Z95)
+                units.append(InertiaUnit(f"u{k}", "a", s_mva[k], True, h_model_s=filed))
+        system = area_inertia(units, settings)[0][-1]
+        covered += system.E_ci95[0] <= e_true <= system.E_ci95[1]
+    coverage = covered / draws
+    assert 0.93 <= coverage <= 0.97, coverage
