@@ -97,6 +97,7 @@ def test_areas_by_bus_list_and_zone(ieee14):
     ({"grid_forming": {"x": 3.0}}, "inertia.grid_forming.x"),
     ({"grid_forming": {"3_1": -3.0}}, "inertia.grid_forming.3_1"),
     ({"flor_MWs": 1.0}, "inertia.flor_MWs"),
+    ({"measured_errors": "correlated"}, "inertia.measured_errors"),
 ])
 def test_bad_inertia_keys_are_refused_in_one_line(tmp_path, table, key):
     with pytest.raises(InputError) as err:

@@ -59,14 +59,15 @@ def inertia_document(fleet: Fleet, areas: list[AreaInertia], units: list[UnitIne
     return {
         "method": "E = sum H S over the online units [MW s]: measured plants at their identified H (whole "
                   "recording), the case's other units at their .dyr H (model), grid-following converters at 0; "
-                  "95 % interval: unit intervals as independent split-normal errors, sums of squares below and "
-                  "above; rocof = f0 dP / (2 E)",
+                  "95 % interval: unit intervals as split-normal errors, the measured units' half-widths added "
+                  "(shared errors; or in quadrature: measured_errors = independent), the model units' in "
+                  "quadrature, the two in quadrature; rocof = f0 dP / (2 E)",
         "time_resolution": "one value per recording",
         "settings": {"areas": cfg.areas if isinstance(cfg.areas, str) else {k: list(v) for k, v in cfg.areas.items()},
                      "status": "raw" if cfg.status is None else cfg.status.source,
                      "model_uncertainty": s.model_uncertainty, "largest_loss_mw": s.largest_loss_mw,
                      "f0_hz": s.f0_hz, "stale_s": s.stale_s, "floor_MWs": s.floor_MWs,
-                     "online_current_pu": cfg.online_current_pu},
+                     "online_current_pu": cfg.online_current_pu, "measured_errors": s.measured_errors},
         "areas": [area_row(a) for a in areas],
         "units": [u._asdict() for u in units],
         "notes": notes,

@@ -8,6 +8,8 @@ inertia on with every default (areas and status from the .raw)::
     status = "raw"            # "raw" (the generators' STAT) or a CSV of unit states over time
                               #   (columns time_s, unit, online; unit "BUS_ID", e.g. "101_1")
     model_uncertainty = 0.15  # half-width of a filed H's 95 % interval, relative [-]
+    measured_errors = "shared"  # measured units' intervals add ("shared") or in quadrature
+                              #   ("independent"); see jaxdse._core.inertia
     largest_loss_mw = 1000.0  # the loss for the rate of change of frequency [MW] (none: not given)
     f0_hz = 50.0              # nominal frequency [Hz] (default: the .raw's BASFRQ)
     update_s = 1.0            # live: a line per area every this many seconds [s]
@@ -28,12 +30,12 @@ import dataclasses
 import math
 from pathlib import Path
 
-from .._core.inertia import InertiaSettings
+from .._core.inertia import MEASURED_ERRORS, InertiaSettings
 from .errors import InputError
 from .schema import no_unknown, positive_number, typed_value
 
 KEYS = {"areas", "status", "model_uncertainty", "largest_loss_mw", "f0_hz", "update_s", "stale_s",
-        "floor_MWs", "online_current_pu", "grid_forming"}
+        "floor_MWs", "online_current_pu", "grid_forming", "measured_errors"}
 STATUS_COLUMNS = ("time_s", "unit", "online")
 
 
@@ -75,11 +77,13 @@ class InertiaConfig:
     """[pu on the unit's MBASE]"""
     grid_forming: dict = dataclasses.field(default_factory=dict)
     """"BUS_ID" -> virtual H [s]."""
+    measured_errors: str = "shared"
 
     def settings(self, f0_hz: float) -> InertiaSettings:
         """The aggregation's numbers (``f0_hz``: the case's, unless the section gives one)."""
         return InertiaSettings(model_uncertainty=self.model_uncertainty, largest_loss_mw=self.largest_loss_mw,
-                               f0_hz=self.f0_hz or f0_hz, stale_s=self.stale_s, floor_MWs=self.floor_MWs)
+                               f0_hz=self.f0_hz or f0_hz, stale_s=self.stale_s, floor_MWs=self.floor_MWs,
+                               measured_errors=self.measured_errors)
 
 
 def inertia_section(path, table) -> InertiaConfig:
@@ -134,6 +138,11 @@ def inertia_section(path, table) -> InertiaConfig:
             raise InputError(path, f"must be below 1 (a relative half-width: 0.15 is +-15 %), got {u!r}",
                              key="inertia.model_uncertainty")
         kw["model_uncertainty"] = u
+    if "measured_errors" in table:
+        if table["measured_errors"] not in MEASURED_ERRORS:
+            raise InputError(path, f"must be one of {', '.join(map(repr, MEASURED_ERRORS))}, got "
+                             f"{table['measured_errors']!r}", key="inertia.measured_errors")
+        kw["measured_errors"] = table["measured_errors"]
     gfm = table.get("grid_forming", {})
     if not isinstance(gfm, dict):
         raise InputError(path, 'must be a table {"BUS_ID" = virtual H in s}', key="inertia.grid_forming")

@@ -1,0 +1,111 @@
+"""The system inertia, live (``jaxdse monitor`` with ``[inertia]``): every ``update_s`` of stream
+time, E per area and for the system from the monitored units' latest identified H and the
+case's other units at their .dyr H (:mod:`jaxdse._core.inertia`), as ``updates.jsonl`` lines
+``{"t", "area", "E_MWs", "E_ci95", "measured_share", "E_commitment_MWs", "rocof_hz_per_s",
+"units_online", "units_measured"}``.
+
+A monitored unit is online while its latest usable sample (no older than ``stale_s``) shows a
+current above ``online_current_pu`` [pu of its rating]; without such a sample (dropped from the
+stream, or unusable) its case status decides. Its measured H is the latest window that
+identified H with an interval (identified or weakly identified), while no older than
+``stale_s``; after that, its model H (``model (stale)``), until it is identified again.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .._core.inertia import AreaInertia, InertiaSettings, area_inertia
+from .._dyr.inertia import CaseUnit, MeasuredPlant, inertia_units
+
+
+class InertiaTracker:
+    """The live state of :mod:`.inertia` (host side, the monitor's main thread).
+
+    Arguments:
+        case: the case's units (:func:`jaxdse._dyr.inertia.case_units`; [] without a case).
+        plants: the monitored units as :class:`~jaxdse._dyr.inertia.MeasuredPlant`.
+        settings: the aggregation's numbers.
+        areas: the areas to report, in order.
+        update_s: stream seconds between lines.
+        online_current_pu: the online threshold [pu of the unit's rating].
+        states: a status CSV (:class:`~jaxdse._io.inertia.UnitStates`) or None (the .raw's)."""
+
+    def __init__(self, case: list[CaseUnit], plants: list[MeasuredPlant], settings: InertiaSettings,
+                 areas: list[str], update_s: float, online_current_pu: float, states=None):
+        self.case, self.plants, self.settings, self.areas = case, plants, settings, areas
+        self.update_s, self.threshold, self.states = update_s, online_current_pu, states
+        self.identified: dict = {}     # unit -> (H, (lo, hi), t of its window's end)
+        self.sample: dict = {}         # unit -> (|I| [pu of rating], t) of its latest usable sample
+        self.next_t: float | None = None
+        self.latest: list[AreaInertia] = []
+
+    def update(self, u) -> None:
+        """A unit's windowed estimate (:class:`~.online.Update`)."""
+        if u.h_s is not None and u.h_ci95 is not None:
+            self.identified[u.unit] = (u.h_s, tuple(u.h_ci95), u.t)
+
+    def samples(self, names, current_pu, usable, t: float) -> None:
+        """The units' samples at stream time ``t`` [s]: |I| on their rating [pu], usable or not."""
+        for name, i, ok in zip(names, current_pu, usable):
+            if ok and math.isfinite(i):
+                self.sample[name] = (float(i), t)
+
+    def tick(self, t: float) -> list[dict]:
+        """The lines due at stream time ``t`` [s]: one set (areas, then the system) at each
+        multiple of ``update_s`` reached since the last call (the latest one only, after a gap)."""
+        k = math.floor(t / self.update_s + 1e-9)
+        if self.next_t is None:
+            self.next_t = (k + 1) * self.update_s
+            return []
+        if t + 1e-9 < self.next_t:
+            return []
+        at = k * self.update_s
+        self.next_t = (k + 1) * self.update_s
+        self.latest = self.at(at)
+        return [a.line(at) for a in self.latest]
+
+    def at(self, t: float) -> list[AreaInertia]:
+        """E per area and system at stream time ``t``."""
+        estimates = {n: (h, ci, t - te) for n, (h, ci, te) in self.identified.items()}
+        online = {n: i > self.threshold for n, (i, ts) in self.sample.items()
+                  if t - ts <= self.settings.stale_s}
+        units = inertia_units(self.case, self.plants, estimates, online, self.states, t)
+        return area_inertia(units, self.settings, self.areas)[0]
+
+
+NO_CASE_AREA = "monitored units"
+"""The one area of a monitor whose units come from a run configuration (no case)."""
+
+
+def tracker_for(units, est, inertia, log) -> InertiaTracker:
+    """The :class:`InertiaTracker` of a monitor's ``units`` (:class:`~.monitor.MonitorUnit`),
+    the source's :class:`~.pmu_sim.Units` ``est`` and its [inertia] ``inertia``; the case's
+    notes (units counted without H, ...) go to ``log``."""
+    from .._dyr.inertia import area_list, case_units, measured_plant
+
+    plants = []
+    if est.case is not None:
+        raw, dyr, members, _ = est.case
+        case, notes = case_units(raw, dyr, inertia)
+        for note in notes:
+            log(f"inertia: {note}")
+        f0 = raw.basfrq_hz
+        areas = area_list(raw, case, inertia.areas)
+    else:
+        raw, members, case = None, {}, []
+        f0 = float(units[0].run.measurement.f_nominal_hz)
+        areas = [NO_CASE_AREA]
+    for u in units:
+        s = float(u.run.plant.machine.s_rated_mva)
+        base = u.name.split("~")[0]
+        if base in members and base == u.name:
+            bus, ids = members[base]
+            plants.append(measured_plant(u.name, bus, ids, s, case, raw, inertia.areas, u.run.h_reference_s))
+        elif base in members:   # a tiled copy (capacity tests): the original's area and H, no case unit
+            p = measured_plant(u.name, *members[base], s, case, raw, inertia.areas, u.run.h_reference_s)
+            plants.append(MeasuredPlant(u.name, p.area, s, p.h_model_s, ()))
+        else:
+            plants.append(MeasuredPlant(u.name, NO_CASE_AREA, s, u.run.h_reference_s, ()))
+    return InertiaTracker(case, plants, inertia.settings(f0), areas, inertia.update_s,
+                          inertia.online_current_pu, inertia.status)
