@@ -94,3 +94,32 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
         assert x["E_ci95"][0] <= truth <= x["E_ci95"][1]
         assert x["rocof_hz_per_s"] == pytest.approx(50 * 1000 / 2 / x["E_MWs"])
     assert summary["inertia"][-1]["area"] == "system"
+
+
+def test_tracker_of_a_fleet_file_takes_the_case():
+    """A monitor of the ANDES ieee14 fleet (two areas): its plants stand for their case units
+    (not counted twice), the case gives the areas, MBASE and filed H; a tiled copy of a plant
+    is an extra unit in the original's area."""
+    from pathlib import Path
+
+    from jaxdse._app.sources import source_units
+    from jaxdse._io.inertia import InertiaConfig
+    from jaxdse._stream.inertia import tracker_for
+    from jaxdse._stream.monitor import MonitorUnit
+
+    bench = Path(__file__).resolve().parents[2] / "experiments" / "andes_bench" / "fleet_ieee14.toml"
+    est = source_units(bench)
+    runs = dict(est.runs)
+    units = [MonitorUnit("B1_G1", runs["B1_G1"], 0), MonitorUnit("B6_G1", runs["B6_G1"], 0),
+             MonitorUnit("B6_G1~2", runs["B6_G1"], 0)]
+    notes = []
+    tr = tracker_for(units, est, InertiaConfig(largest_loss_mw=100.0), notes.append)
+    assert tr.areas == ["area 1", "area 2"] and tr.settings.f0_hz == 60.0 and notes == []
+    assert [(p.name, p.area, p.h_model_s, p.members) for p in tr.plants] == [
+        ("B1_G1", "area 1", 4.0, ("1_1",)), ("B6_G1", "area 2", 5.0, ("6_1",)), ("B6_G1~2", "area 2", 5.0, ())]
+    tr.update(_update("B1_G1", 10.0, 4.4, (4.2, 4.6)))
+    a1, a2, system = tr.at(12.0)
+    # area 1: B1_G1 measured 440 + 2_1 650 + 3_1 500; area 2: B6_G1 and its copy 500 each + 8_1 500
+    assert a1.E_MWs == pytest.approx(1590) and a1.units_online == 3 and a1.units_measured == 1
+    assert a2.E_MWs == pytest.approx(1500) and a2.units_online == 3 and a2.units_stale == 2
+    assert system.E_commitment_MWs == pytest.approx(400 + 650 + 500 + 1500)

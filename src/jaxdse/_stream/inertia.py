@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from .._core.inertia import AreaInertia, InertiaSettings, area_inertia
 from .._dyr.inertia import CaseUnit, MeasuredPlant, inertia_units
 
@@ -36,7 +38,7 @@ class InertiaTracker:
         self.case, self.plants, self.settings, self.areas = case, plants, settings, areas
         self.update_s, self.threshold, self.states = update_s, online_current_pu, states
         self.identified: dict = {}     # unit -> (H, (lo, hi), t of its window's end)
-        self.sample: dict = {}         # unit -> (|I| [pu of rating], t) of its latest usable sample
+        self.streams: dict = {}        # key -> [names, |I| [pu of rating], t] of each unit's latest usable sample
         self.next_t: float | None = None
         self.latest: list[AreaInertia] = []
 
@@ -45,11 +47,17 @@ class InertiaTracker:
         if u.h_s is not None and u.h_ci95 is not None:
             self.identified[u.unit] = (u.h_s, tuple(u.h_ci95), u.t)
 
-    def samples(self, names, current_pu, usable, t: float) -> None:
-        """The units' samples at stream time ``t`` [s]: |I| on their rating [pu], usable or not."""
-        for name, i, ok in zip(names, current_pu, usable):
-            if ok and math.isfinite(i):
-                self.sample[name] = (float(i), t)
+    def samples(self, names, current_pu, usable, t: float, key=None) -> None:
+        """The units' samples at stream time ``t`` [s]: |I| on their rating [pu], usable or not
+        (``key``: the stream's, whose units are always ``names``; default: the names)."""
+        key = tuple(names) if key is None else key
+        st = self.streams.get(key)
+        if st is None:
+            st = self.streams[key] = [list(names), np.full(len(names), np.nan), np.full(len(names), -np.inf)]
+        current = np.asarray(current_pu, float)
+        ok = np.asarray(usable, bool) & np.isfinite(current)
+        st[1] = np.where(ok, current, st[1])
+        st[2] = np.where(ok, t, st[2])
 
     def tick(self, t: float) -> list[dict]:
         """The lines due at stream time ``t`` [s]: one set (areas, then the system) at each
@@ -68,8 +76,10 @@ class InertiaTracker:
     def at(self, t: float) -> list[AreaInertia]:
         """E per area and system at stream time ``t``."""
         estimates = {n: (h, ci, t - te) for n, (h, ci, te) in self.identified.items()}
-        online = {n: i > self.threshold for n, (i, ts) in self.sample.items()
-                  if t - ts <= self.settings.stale_s}
+        online = {}
+        for names, current, ts in self.streams.values():
+            fresh = t - ts <= self.settings.stale_s
+            online.update((n, bool(i > self.threshold)) for n, i, f in zip(names, current, fresh) if f)
         units = inertia_units(self.case, self.plants, estimates, online, self.states, t)
         return area_inertia(units, self.settings, self.areas)[0]
 

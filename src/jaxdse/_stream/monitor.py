@@ -660,7 +660,7 @@ class _Stream:
             f = np.full_like(f, np.nan)
         vm, va, im, ia = np.abs(v), np.angle(v), np.abs(i), np.angle(i)
         if self.tracker is not None:
-            self.tracker.samples(self.names, im * self.machine_scale, usable, idx / self.rate)
+            self.tracker.samples(self.names, im * self.machine_scale, usable, idx / self.rate, key=self.k)
         if self.file is not None:
             part = self.parts[-1]
             if part["index0"] is None:
