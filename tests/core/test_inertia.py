@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from jaxdse._core.inertia import InertiaSettings, InertiaUnit, Z95, area_inertia
+from jaxdse._core.inertia import AreaInertia, InertiaSettings, InertiaUnit, Z95, area_inertia
 
 
 def _fleet():
@@ -137,3 +137,51 @@ def test_quadrature_undercovers_shared_errors():
     """Why "shared" is the default: when the measured units' errors move together (as on the
     ANDES ieee14 line trip), their intervals summed in quadrature cover far less than 95 %."""
     assert _coverage(False, True, "independent", draws=1000) < 0.85
+
+
+@pytest.mark.parametrize("mode", ["shared", "independent"])
+def test_table_inertia_equals_the_unit_by_unit_rules(mode):
+    """The vectorised form (a live monitor's thousands of units) against the unit-by-unit one
+    on a random fleet of every kind: offline, converters, no H record, measured fresh, stale,
+    without interval, and an empty area."""
+    from jaxdse._core.inertia import UnitTable, table_inertia
+
+    rng = np.random.default_rng(1)
+    n = 300
+    areas = ["a", "b", "c", "empty"]
+    units = []
+    for k in range(n):
+        kind = rng.choice(["synchronous", "synchronous", "grid_forming", "ibr_following", "no_h_record"])
+        measured = kind in ("synchronous", "grid_forming") and rng.random() < 0.5
+        h = rng.uniform(2, 8)
+        ci = (h * 0.9, h * 1.2) if rng.random() < 0.9 else None
+        units.append(InertiaUnit(f"u{k}", str(rng.choice(areas[:3])), float(rng.uniform(10, 900)),
+                                 bool(rng.random() < 0.85), str(kind),
+                                 None if kind in ("no_h_record", "ibr_following") else float(rng.uniform(2, 8)),
+                                 h_s=h if measured else None, h_ci95=ci if measured else None,
+                                 age_s=float(rng.uniform(0, 60)) if measured else None, measured=measured))
+    settings = InertiaSettings(model_uncertainty=0.12, largest_loss_mw=500.0, stale_s=30.0, floor_MWs=1e4,
+                               measured_errors=mode)
+    expected, _ = area_inertia(units, settings, areas)
+
+    def col(f, missing=np.nan):
+        return np.array([missing if f(u) is None else f(u) for u in units], float)
+
+    table = UnitTable(area=np.array([areas.index(u.area) for u in units]), s_mva=col(lambda u: u.s_mva),
+                      online=np.array([u.online for u in units]),
+                      ibr_following=np.array([u.kind == "ibr_following" for u in units]),
+                      h_model_s=col(lambda u: u.h_model_s), measured=np.array([u.measured for u in units]),
+                      h_s=col(lambda u: u.h_s), h_lo_s=col(lambda u: u.h_ci95 and u.h_ci95[0]),
+                      h_hi_s=col(lambda u: u.h_ci95 and u.h_ci95[1]), age_s=col(lambda u: u.age_s, np.inf))
+    got = table_inertia(table, areas, settings)
+    assert [r.area for r in got] == [r.area for r in expected] == [*areas, "system"]
+    for g, x in zip(got, expected):
+        for field in AreaInertia._fields:
+            a, b = getattr(g, field), getattr(x, field)
+            if isinstance(b, float):
+                assert a == pytest.approx(b, rel=1e-12, abs=1e-9), (field, g.area)
+            elif isinstance(b, tuple):
+                assert a == pytest.approx(b, rel=1e-12, abs=1e-9), (field, g.area)
+            else:
+                assert a == b, (field, g.area)
+    assert expected[0].units_stale > 0 and expected[0].units_without_h > 0 and expected[0].units_measured > 0

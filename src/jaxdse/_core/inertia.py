@@ -52,6 +52,8 @@ import dataclasses
 import math
 from typing import NamedTuple
 
+import numpy as np
+
 Z95 = 1.959963984540054
 """The standard normal's 97.5 % quantile: a 95 % interval is +-Z95 sigma."""
 KINDS = ("synchronous", "grid_forming", "ibr_following", "no_h_record")
@@ -218,7 +220,15 @@ def combine(contributions: list[UnitInertia], area: str, settings: InertiaSettin
             measured += c.e_MWs
         stale += c.source in ("model (stale)", "model (no interval)")
         without += c.source == "no H record"
-    ci = (max(0.0, e - math.sqrt(lo1 ** 2 + lo2)), e + math.sqrt(hi1 ** 2 + hi2))
+    return _area_row(area, e, math.sqrt(lo1 ** 2 + lo2), math.sqrt(hi1 ** 2 + hi2), measured, commitment,
+                     online, n_measured, stale, without, settings)
+
+
+def _area_row(area, e, lo, hi, measured, commitment, online, n_measured, stale, without,
+              settings: InertiaSettings) -> AreaInertia:
+    """An :class:`AreaInertia` from its sums; ``lo``, ``hi``: the interval's half-widths [MW s]."""
+    e, measured, commitment = float(e), float(measured), float(commitment)
+    ci = (max(0.0, e - float(lo)), e + float(hi))
     rocof, rocof_ci, why = None, None, None
     if settings.largest_loss_mw is None:
         why = "no largest_loss_mw configured"
@@ -230,9 +240,63 @@ def combine(contributions: list[UnitInertia], area: str, settings: InertiaSettin
         rocof_ci = (k / ci[1], k / ci[0] if ci[0] > 0 else None)
     return AreaInertia(area=area, E_MWs=e, E_ci95=ci, E_measured_MWs=measured,
                        measured_share=measured / e if e > 0 else None, E_commitment_MWs=commitment,
-                       rocof_hz_per_s=rocof, rocof_ci95=rocof_ci, rocof_reason=why, units_online=online,
-                       units_measured=n_measured, units_stale=stale, units_without_h=without,
+                       rocof_hz_per_s=rocof, rocof_ci95=rocof_ci, rocof_reason=why, units_online=int(online),
+                       units_measured=int(n_measured), units_stale=int(stale), units_without_h=int(without),
                        below_floor=None if settings.floor_MWs is None else e < settings.floor_MWs)
+
+
+class UnitTable(NamedTuple):
+    """The units as arrays, one entry each (a live monitor's thousands, every second): the
+    same fields as :class:`InertiaUnit`, NaN where a value is absent."""
+
+    area: np.ndarray
+    """Index into the area names [int]."""
+    s_mva: np.ndarray
+    online: np.ndarray
+    """[bool]"""
+    ibr_following: np.ndarray
+    """[bool] a grid-following converter (kind ``ibr_following``)."""
+    h_model_s: np.ndarray
+    """NaN: no filed H."""
+    measured: np.ndarray
+    """[bool]"""
+    h_s: np.ndarray
+    """NaN: no estimate."""
+    h_lo_s: np.ndarray
+    h_hi_s: np.ndarray
+    """The estimate's 95 % interval (NaN: none)."""
+    age_s: np.ndarray
+    """inf: no estimate."""
+
+
+def table_inertia(t: UnitTable, areas: list[str], settings: InertiaSettings) -> list[AreaInertia]:
+    """:func:`area_inertia`'s areas (then the system's) for units as arrays: the same rules,
+    vectorised (tests/core/test_inertia.py compares the two)."""
+    s = np.asarray(t.s_mva, float)
+    on = np.asarray(t.online, bool) & ~np.asarray(t.ibr_following, bool)
+    fresh = np.asarray(t.measured, bool) & np.isfinite(t.h_s) & (np.asarray(t.age_s) <= settings.stale_s)
+    meas = on & fresh & np.isfinite(t.h_lo_s) & np.isfinite(t.h_hi_s)
+    has_model = np.isfinite(t.h_model_s)
+    model = on & ~meas & has_model
+    h_meas = np.where(meas, t.h_s, 0.0)
+    e = np.where(meas, h_meas, np.where(model, t.h_model_s, 0.0)) * s
+    u = settings.model_uncertainty
+    lo = np.where(meas, (h_meas - np.minimum(np.where(meas, t.h_lo_s, 0.0), h_meas)) * s, e * u * model)
+    hi = np.where(meas, (np.maximum(np.where(meas, t.h_hi_s, 0.0), h_meas) - h_meas) * s, e * u * model)
+    linear = meas if settings.measured_errors == "shared" else np.zeros_like(meas)
+    columns = (e, lo * linear, lo ** 2 * ~linear, hi * linear, hi ** 2 * ~linear, e * meas,
+               np.where(on & has_model, np.where(has_model, t.h_model_s, 0.0) * s, 0.0),
+               np.asarray(t.online, bool), meas, on & np.asarray(t.measured, bool) & ~meas & has_model,
+               on & ~meas & ~has_model)
+    idx = np.asarray(t.area, int)
+    per_area = np.stack([np.bincount(idx, weights=np.asarray(c, float), minlength=len(areas)) for c in columns])
+    total = per_area.sum(axis=1)
+    rows = []
+    for name, (e_a, lo1, lo2, hi1, hi2, m, com, n_on, n_m, n_st, n_wo) in zip(
+            [*areas, "system"], [*per_area.T, total]):
+        rows.append(_area_row(name, e_a, math.sqrt(lo1 ** 2 + lo2), math.sqrt(hi1 ** 2 + hi2), m, com,
+                              round(n_on), round(n_m), round(n_st), round(n_wo), settings))
+    return rows
 
 
 def area_inertia(units: list[InertiaUnit], settings: InertiaSettings,
@@ -248,9 +312,8 @@ def area_inertia(units: list[InertiaUnit], settings: InertiaSettings,
     Returns:
         (one :class:`AreaInertia` per area then the system's, one :class:`UnitInertia` per unit)."""
     contributions = [unit_inertia(u, settings) for u in units]
-    names = list(areas) if areas is not None else []
-    for u in units:
-        if u.area not in names:
-            names.append(u.area)
-    rows = [combine([c for c in contributions if c.area == a], a, settings) for a in names]
+    by_area: dict = {a: [] for a in (areas or ())}
+    for c in contributions:
+        by_area.setdefault(c.area, []).append(c)
+    rows = [combine(members, a, settings) for a, members in by_area.items()]
     return rows + [combine(contributions, "system", settings)], contributions

@@ -17,12 +17,15 @@ import math
 
 import numpy as np
 
-from .._core.inertia import AreaInertia, InertiaSettings, area_inertia
-from .._dyr.inertia import CaseUnit, MeasuredPlant, inertia_units
+from .._core.inertia import AreaInertia, InertiaSettings, UnitTable, table_inertia
+from .._dyr.inertia import CaseUnit, MeasuredPlant
 
 
 class InertiaTracker:
-    """The live state of :mod:`.inertia` (host side, the monitor's main thread).
+    """The live state of :mod:`.inertia` (host side, the monitor's main thread): the units as
+    arrays (:class:`~jaxdse._core.inertia.UnitTable`), the monitored plants first, then the
+    case's units that no plant stands for; each update and each frame changes a few entries,
+    each line set is one vectorised sum.
 
     Arguments:
         case: the case's units (:func:`jaxdse._dyr.inertia.case_units`; [] without a case).
@@ -35,17 +38,40 @@ class InertiaTracker:
 
     def __init__(self, case: list[CaseUnit], plants: list[MeasuredPlant], settings: InertiaSettings,
                  areas: list[str], update_s: float, online_current_pu: float, states=None):
-        self.case, self.plants, self.settings, self.areas = case, plants, settings, areas
+        self.case, self.plants, self.settings = case, plants, settings
         self.update_s, self.threshold, self.states = update_s, online_current_pu, states
-        self.identified: dict = {}     # unit -> (H, (lo, hi), t of its window's end)
-        self.streams: dict = {}        # key -> [names, |I| [pu of rating], t] of each unit's latest usable sample
+        taken = {n for p in plants for n in p.members}
+        self.others = [u for u in case if u.name not in taken]
+        self.by_case = {u.name: u for u in case}
+        self.areas = list(areas)
+        for a in [p.area for p in plants] + [u.area for u in self.others]:
+            if a not in self.areas:
+                self.areas.append(a)
+        n_p = len(plants)
+        self.index = {p.name: k for k, p in enumerate(plants)}
+        self.table = UnitTable(
+            area=np.array([self.areas.index(a) for a in [p.area for p in plants] + [u.area for u in self.others]],
+                          int),
+            s_mva=np.array([p.s_mva for p in plants] + [u.s_mva for u in self.others], float),
+            online=np.zeros(n_p + len(self.others), bool),
+            ibr_following=np.array([False] * n_p + [u.kind == "ibr_following" for u in self.others], bool),
+            h_model_s=np.array([np.nan if x.h_model_s is None else x.h_model_s for x in [*plants, *self.others]],
+                               float),
+            measured=np.arange(n_p + len(self.others)) < n_p,
+            h_s=np.full(n_p + len(self.others), np.nan), h_lo_s=np.full(n_p + len(self.others), np.nan),
+            h_hi_s=np.full(n_p + len(self.others), np.nan), age_s=np.full(n_p + len(self.others), np.inf))
+        self.t_identified = np.full(n_p, -np.inf)      # stream time of each plant's window that gave its H
+        self.streams: dict = {}    # key -> [plant indices, |I| [pu of rating], t] of the latest usable samples
         self.next_t: float | None = None
         self.latest: list[AreaInertia] = []
+        self.raw_status: np.ndarray | None = None
 
     def update(self, u) -> None:
         """A unit's windowed estimate (:class:`~.online.Update`)."""
-        if u.h_s is not None and u.h_ci95 is not None:
-            self.identified[u.unit] = (u.h_s, tuple(u.h_ci95), u.t)
+        k = self.index.get(u.unit)
+        if k is not None and u.h_s is not None and u.h_ci95 is not None:
+            self.table.h_s[k], (self.table.h_lo_s[k], self.table.h_hi_s[k]) = u.h_s, u.h_ci95
+            self.t_identified[k] = u.t
 
     def samples(self, names, current_pu, usable, t: float, key=None) -> None:
         """The units' samples at stream time ``t`` [s]: |I| on their rating [pu], usable or not
@@ -53,7 +79,8 @@ class InertiaTracker:
         key = tuple(names) if key is None else key
         st = self.streams.get(key)
         if st is None:
-            st = self.streams[key] = [list(names), np.full(len(names), np.nan), np.full(len(names), -np.inf)]
+            st = self.streams[key] = [np.array([self.index.get(n, -1) for n in names], int),
+                                      np.full(len(names), np.nan), np.full(len(names), -np.inf)]
         current = np.asarray(current_pu, float)
         ok = np.asarray(usable, bool) & np.isfinite(current)
         st[1] = np.where(ok, current, st[1])
@@ -73,15 +100,32 @@ class InertiaTracker:
         self.latest = self.at(at)
         return [a.line(at) for a in self.latest]
 
+    def _status(self, u: CaseUnit, t: float) -> bool:
+        return u.in_service if self.states is None else self.states.online(u.name, t, u.in_service)
+
+    def _case_status(self, t: float) -> np.ndarray:
+        """Every unit's status by the case (a plant: any of its case units'; the .raw's STAT
+        or the status CSV's at ``t``)."""
+        out = []
+        for p in self.plants:
+            mine = [self.by_case[n] for n in p.members if n in self.by_case]
+            out.append(any(self._status(u, t) for u in mine) if mine else True)
+        return np.array(out + [self._status(u, t) for u in self.others], bool)
+
     def at(self, t: float) -> list[AreaInertia]:
         """E per area and system at stream time ``t``."""
-        estimates = {n: (h, ci, t - te) for n, (h, ci, te) in self.identified.items()}
-        online = {}
-        for names, current, ts in self.streams.values():
-            fresh = t - ts <= self.settings.stale_s
-            online.update((n, bool(i > self.threshold)) for n, i, f in zip(names, current, fresh) if f)
-        units = inertia_units(self.case, self.plants, estimates, online, self.states, t)
-        return area_inertia(units, self.settings, self.areas)[0]
+        n_p = len(self.plants)
+        if self.states is not None or self.raw_status is None:   # the .raw's: once
+            status = self._case_status(t)
+            if self.states is None:
+                self.raw_status = status
+        online = self.table.online
+        online[:] = self.raw_status if self.states is None else status
+        for idx, current, ts in self.streams.values():
+            fresh = (t - ts <= self.settings.stale_s) & (idx >= 0)
+            online[idx[fresh]] = current[fresh] > self.threshold
+        self.table.age_s[:n_p] = t - self.t_identified
+        return table_inertia(self.table, self.areas, self.settings)
 
 
 NO_CASE_AREA = "monitored units"
