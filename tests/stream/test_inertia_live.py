@@ -63,7 +63,8 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
     absent", no phasors). Every update_s of stream time a line for the one area of a run
     configuration and one for the system; once the second unit's last H is stale_s old it
     counts at its model H (h_reference_s): the measured share falls from 1 to 1/2, E moves
-    less than its interval from one line to the next, the truth stays inside, nothing crashes."""
+    less than its interval from one line to the next, the truth stays inside, nothing crashes.
+    Below the floor (20 GW s) the log says so once per area."""
     from jaxdse._app.sources import load_monitor, load_source
     from jaxdse._stream import pmu_sim
     from jaxdse._stream.monitor import Monitor
@@ -73,9 +74,10 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
     with server.serve_in_thread() as (host, port):
         (tmp_path / "m.toml").write_text(
             f'fleet = "{run_config}"\nwindow_s = 10.0\ntile = 2\n'
-            "[inertia]\nlargest_loss_mw = 1000.0\nstale_s = 5.0\nupdate_s = 2.0\n"
+            "[inertia]\nlargest_loss_mw = 1000.0\nstale_s = 5.0\nupdate_s = 2.0\nfloor_MWs = 20000.0\n"
             f'[stream]\nhost = "{host}"\nport = {port}\n')
-        summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=lambda x: None).run(6.5)
+        log = []
+        summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=log.append).run(6.5)
     lines = [json.loads(x) for x in (tmp_path / "o" / "updates.jsonl").read_text().splitlines()]
     system = [x for x in lines if x.get("area") == "system"]
     area = [x for x in lines if x.get("area") == "monitored units"]
@@ -93,7 +95,9 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
         assert lo <= x["E_MWs"] <= hi, (prev, x)                 # no jump beyond the interval
         assert x["E_ci95"][0] <= truth <= x["E_ci95"][1]
         assert x["rocof_hz_per_s"] == pytest.approx(50 * 1000 / 2 / x["E_MWs"])
-    assert summary["inertia"][-1]["area"] == "system"
+    assert summary["inertia"][-1]["area"] == "system" and summary["inertia"][-1]["below_floor"] is True
+    alarms = [x for x in log if x.startswith("ALARM inertia")]          # once per area, not every line
+    assert len(alarms) == 2 and "below the floor 20 GW s" in alarms[-1] and "system" in alarms[-1]
 
 
 def test_tracker_of_a_fleet_file_takes_the_case():
