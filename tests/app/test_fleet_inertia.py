@@ -55,7 +55,7 @@ def test_fleet_inertia_sums_measured_and_model_units(ieee14, tmp_path):
     assert system.E_MWs == pytest.approx(1570) and system.below_floor is False
     assert system.rocof_hz_per_s == pytest.approx(60 * 100 / 2 / 1570)
     by = {u.name: u for u in units}
-    assert by["B2_G1"].source == "model (stale)" and by["3_1"].source == "model"
+    assert by["B2_G1"].source == "model (no estimate)" and by["3_1"].source == "model"
     assert by["8_1"].source == "offline" and by["B6_G1"].source == "offline"
     # at the end of the status CSV (t = 200 s) 8_1 is online again
     areas, _, _ = fleet_inertia(fl, plants, entries, currents, t_end=200.0)

@@ -6,7 +6,7 @@ From files it is one value per recording: each measured plant's whole-recording 
 identified H and interval), the case's other units at the status the .raw (or the status CSV at
 the recording's last sample) gives. A measured plant is online when its recorded current's mean
 is above ``online_current_pu`` [pu of its rating]; an estimate that is not identified (or
-weakly identified) leaves the plant on its model H (``model (stale)``).
+weakly identified) leaves the plant on its model H (``model (no estimate)``).
 """
 
 from __future__ import annotations

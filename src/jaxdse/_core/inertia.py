@@ -10,9 +10,10 @@ Each unit contributes H_i S_i (H on its own rating S_i [MVA]), by where its H co
 * ``model``: the H of its .dyr machine record (a grid-forming unit: its virtual H from the
   records), with the relative uncertainty ``model_uncertainty`` as the half-width of its 95 %
   interval (0.15: the true H within +-15 % of the filed one);
-* ``model (stale)``: a measured unit whose last identification is older than ``stale_s``, or
-  that has none yet: the model H, visibly; ``model (no interval)``: an identified H without
-  an interval is not used;
+* ``model (stale)``: a measured unit whose last identification is older than ``stale_s``;
+  ``model (no estimate)``: one that has none (not identified, or its window still filling);
+  ``model (no interval)``: an identified H without an interval is not used; each on its
+  model H, visibly (``units_stale`` counts them);
 * ``ibr_following``: a grid-following converter: 0, no uncertainty;
 * ``no H record``: an online unit whose H the case does not give (no machine record): 0 with
   no uncertainty, and counted apart (``units_without_h``): E is then a lower bound;
@@ -59,8 +60,8 @@ Z95 = 1.959963984540054
 KINDS = ("synchronous", "grid_forming", "ibr_following", "no_h_record")
 """What a unit is: a synchronous machine, a grid-forming converter (virtual H), a
 grid-following converter (no inertia) or an online unit without an H in the case."""
-SOURCES = ("measured", "model", "model (stale)", "model (no interval)", "ibr_following", "no H record",
-           "offline")
+SOURCES = ("measured", "model", "model (stale)", "model (no estimate)", "model (no interval)", "ibr_following",
+           "no H record", "offline")
 """Where a unit's contribution comes from (see the module docstring)."""
 MEASURED_ERRORS = ("shared", "independent")
 
@@ -160,7 +161,7 @@ class AreaInertia(NamedTuple):
     units_measured: int
     """Online units whose measured H is used."""
     units_stale: int
-    """Measured units on their model H (stale, no estimate yet, or no interval)."""
+    """Measured units on their model H (stale, no estimate, or no interval)."""
     units_without_h: int
     """Online units without an H in the case, counted at 0 (E is then a lower bound)."""
     below_floor: bool | None
@@ -192,7 +193,8 @@ def unit_inertia(u: InertiaUnit, settings: InertiaSettings) -> UnitInertia:
     if model is None:
         return UnitInertia(u.name, u.area, True, "no_h_record" if not u.measured else u.kind,
                            "no H record", None, 0.0, 0.0, 0.0, 0.0)
-    source = "model" if not u.measured else "model (no interval)" if fresh else "model (stale)"
+    source = ("model" if not u.measured else "model (no interval)" if fresh
+              else "model (no estimate)" if u.h_s is None or u.age_s is None else "model (stale)")
     e = model * s
     return UnitInertia(u.name, u.area, True, u.kind, source, model, e, e * (1 - settings.model_uncertainty),
                        e * (1 + settings.model_uncertainty), commitment)
@@ -218,7 +220,7 @@ def combine(contributions: list[UnitInertia], area: str, settings: InertiaSettin
         if c.source == "measured":
             n_measured += 1
             measured += c.e_MWs
-        stale += c.source in ("model (stale)", "model (no interval)")
+        stale += c.source in ("model (stale)", "model (no estimate)", "model (no interval)")
         without += c.source == "no H record"
     return _area_row(area, e, math.sqrt(lo1 ** 2 + lo2), math.sqrt(hi1 ** 2 + hi2), measured, commitment,
                      online, n_measured, stale, without, settings)

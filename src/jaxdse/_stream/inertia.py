@@ -8,7 +8,8 @@ A monitored unit is online while its latest usable sample (no older than ``stale
 current above ``online_current_pu`` [pu of its rating]; without such a sample (dropped from the
 stream, or unusable) its case status decides. Its measured H is the latest window that
 identified H with an interval (identified or weakly identified), while no older than
-``stale_s``; after that, its model H (``model (stale)``), until it is identified again.
+``stale_s``; after that, or before its first, its model H (``units_stale`` counts it), until
+it is identified again.
 """
 
 from __future__ import annotations
