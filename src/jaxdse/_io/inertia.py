@@ -162,8 +162,10 @@ def unit_name(bus: int, machine_id: str) -> str:
 
 
 def read_unit_states(path) -> UnitStates:
-    """A CSV of unit states (columns time_s [s since 1970, or of the recording], unit "BUS_ID",
-    online 1/0 or true/false); a bad row raises a one-line :class:`InputError` naming it."""
+    """A CSV of unit states (columns time_s, unit "BUS_ID", online 1/0 or true/false; a row's
+    state holds from its time to the unit's next row); a bad row raises a one-line
+    :class:`InputError` naming it. time_s is the stream's time, seconds since 1970, for
+    ``jaxdse monitor``; seconds from the recording's first sample for ``jaxdse fleet``."""
     path = Path(path)
     states: dict = {}
     with open(path, newline="") as fh:
