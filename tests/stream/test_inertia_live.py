@@ -58,9 +58,10 @@ def run_config(tmp_path_factory):
 
 
 def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tmp_path):
-    """One stream of two stations (``tile = 2``: the example's unit, 1100 MVA, H 6.18 s,
-    twice); from 40 s of stream time the second station's data are absent (STAT "test or
-    absent", no phasors). Every update_s of stream time a line for the one area of a run
+    """Two stations (``tile = 2``: the example's unit, 1100 MVA, H 6.18 s, twice), read as
+    two streams of one unit each from one server (the shapes of test_monitor.py's
+    test_one_streams_failure_costs_its_units_only: compiled once in a run); from 40 s of stream
+    time the second station's data are absent (STAT "test or absent", no phasors). Every update_s of stream time a line for the one area of a run
     configuration and one for the system; once the second unit's last H is stale_s old it
     counts at its model H (h_reference_s): the measured share falls from 1 to 1/2, E moves
     less than its interval from one line to the next, the truth stays inside, nothing crashes.
@@ -75,7 +76,8 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
         (tmp_path / "m.toml").write_text(
             f'fleet = "{run_config}"\nwindow_s = 10.0\ntile = 2\n'
             "[inertia]\nlargest_loss_mw = 1000.0\nstale_s = 5.0\nupdate_s = 2.0\nfloor_MWs = 20000.0\n"
-            f'[stream]\nhost = "{host}"\nport = {port}\n')
+            f'[[stream]]\nhost = "{host}"\nport = {port}\nunits = ["unit1"]\n'
+            f'[[stream]]\nhost = "{host}"\nport = {port}\nunits = ["unit1~2"]\n')
         log = []
         summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=log.append).run(6.5)
     lines = [json.loads(x) for x in (tmp_path / "o" / "updates.jsonl").read_text().splitlines()]
@@ -83,11 +85,13 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
     area = [x for x in lines if x.get("area") == "monitored units"]
     assert system and len(area) == len(system) and all(list(x) == KEYS for x in system)
     assert all(abs(x["t"] / 2.0 - round(x["t"] / 2.0)) < 1e-6 for x in system)
-    both = [x for x in system if x["units_measured"] == 2]
-    one = [x for x in system if x["units_measured"] == 1]
-    assert both and one and max(x["t"] for x in both) < min(x["t"] for x in one)
-    assert all(x["measured_share"] == 1.0 for x in both)
-    assert all(0.45 < x["measured_share"] < 0.55 for x in one)
+    # the two streams' windows fill one after the other; once both units are measured, the
+    # count only falls (the second unit's data absent from 40 s, its H stale 5 s later)
+    first = next(k for k, x in enumerate(system) if x["units_measured"] == 2)
+    after = [x["units_measured"] for x in system[first:]]
+    assert after == sorted(after, reverse=True) and after[-1] == 1 and after.count(1) >= 5, after
+    assert all(x["measured_share"] == 1.0 for x in system if x["units_measured"] == 2)
+    assert all(0.45 < x["measured_share"] < 0.55 for x in system if x["units_measured"] == 1)
     truth = 2 * 6.18 * 1100.0
     for prev, x in zip(system, system[1:]):
         assert x["units_online"] == 2 and x["E_commitment_MWs"] == pytest.approx(truth)
