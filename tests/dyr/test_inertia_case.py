@@ -45,7 +45,9 @@ def test_case_units_by_kind(case, tmp_path):
     assert by["3_3"].kind == "no_h_record" and by["3_3"].h_model_s is None
     assert (by["3_4"].kind, by["3_4"].h_model_s) == ("grid_forming", 2.5)
     assert (by["3_5"].kind, by["3_5"].h_model_s, by["3_5"].in_service) == ("synchronous", 3.0, False)
-    assert len(notes) == 1 and "3" in notes[0] and "counted at H = 0" in notes[0]
+    assert notes == ["1 online generator record(s) without an H in the case (no dynamic records: 1), counted "
+                     "at H = 0 (E is a lower bound; name them in [inertia] grid_forming if they are grid-forming "
+                     "converters): 3_3"]
     assert area_list(raw, units, "area") == ["area 1", "area 2"]
     rows, terms = area_inertia(inertia_units(units, [], {}, {}), InertiaSettings(), area_list(raw, units, "area"))
     system = rows[-1]

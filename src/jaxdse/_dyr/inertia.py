@@ -61,9 +61,9 @@ def area_of(raw: RawCase, bus: int, areas) -> str:
 
 
 def case_units(raw: RawCase, dyr: DyrData, cfg: InertiaConfig) -> tuple[list[CaseUnit], list[str]]:
-    """Every generator record of the case that is a unit, and notes (one line each) about the
-    ones counted without H."""
-    units, notes = [], []
+    """Every generator record of the case that is a unit, and notes (one line each: an H that
+    cannot be read; the online records without an H, in one line)."""
+    units, notes, without = [], [], {}
     for a in inventory(raw, dyr).generators:
         if a.category in ("not a generator", "duplicate"):
             continue
@@ -90,9 +90,16 @@ def case_units(raw: RawCase, dyr: DyrData, cfg: InertiaConfig) -> tuple[list[Cas
         else:
             kind = "no_h_record"
             if g.stat == 1:
-                notes.append(f"{a.why}; counted at H = 0 (E is a lower bound)")
+                without.setdefault(a.category, []).append(name)
         units.append(CaseUnit(name, g.bus, g.id.strip(), area_of(raw, g.bus, cfg.areas), float(s), kind, h,
                               g.stat == 1, a.why))
+    if without:
+        names = [n for group in without.values() for n in group]
+        notes.append(f"{len(names)} online generator record(s) without an H in the case ("
+                     + ", ".join(f"{category}: {len(group)}" for category, group in without.items())
+                     + "), counted at H = 0 (E is a lower bound; name them in [inertia] grid_forming if "
+                     f"they are grid-forming converters): {', '.join(names[:10])}"
+                     + (f" and {len(names) - 10} more" if len(names) > 10 else ""))
     return units, notes
 
 
