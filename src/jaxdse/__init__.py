@@ -28,6 +28,11 @@ from ._core.estimate import Replay as Replay
 from ._core.estimate import estimate as estimate
 from ._core.estimate import replay as replay
 from ._core.identify import Identified as Identified
+from ._core.inertia import AreaInertia as AreaInertia
+from ._core.inertia import InertiaSettings as InertiaSettings
+from ._core.inertia import InertiaUnit as InertiaUnit
+from ._core.inertia import UnitInertia as UnitInertia
+from ._core.inertia import area_inertia as area_inertia
 from ._core.identify import IdentifySettings as IdentifySettings
 from ._core.identify import identify as identify
 from ._core.integrate import Integrator as Integrator

@@ -46,11 +46,15 @@ def links(path: Path) -> list[str]:
 @pytest.fixture(scope="module")
 def ieee14(tmp_path_factory):
     """The ANDES ieee14 line trip as a fleet, run once (4 bootstrap draws instead of 32: time),
-    played back with the surrogate (the .dyr playback, the default: tests/app/test_dyr_playback.py)."""
+    played back with the surrogate (the .dyr playback, the default: tests/app/test_dyr_playback.py),
+    with ``[inertia] largest_loss_mw = 100``."""
+    from jaxdse._io.inertia import InertiaConfig
+
     out = tmp_path_factory.mktemp("fleet")
     fl = load_fleet(BENCH / "fleet_ieee14.toml")
     doc = run_fleet(dataclasses.replace(fl, identify=jd.IdentifySettings(bootstrap_draws=4),
-                                        playback=PlaybackOptions(model="surrogate")), out)
+                                        playback=PlaybackOptions(model="surrogate"),
+                                        inertia=InertiaConfig(largest_loss_mw=100.0)), out)
     return 0, out, json.loads((out / "fleet.json").read_text()) | {"returned": doc}
 
 
@@ -105,6 +109,28 @@ def test_fleet_json_and_report(ieee14):
     # every generator record of the case: the five, all in the fleet
     assert doc["accounting"]["summary"]["generator_records"] == doc["accounting"]["summary"]["in_fleet"] == 5
     assert "Every generator record of the case" in head and "<b>5</b> generator records" in head
+
+
+def test_fleet_writes_the_system_inertia(ieee14):
+    """[inertia]: every plant online and measured where its H is identified (or weakly), the
+    rest at the .dyr H; E = sum of the terms, and the truth (sum H_true S = 2550 MW s, the
+    simulated H are the .dyr's) within E's interval."""
+    _, out, doc = ieee14
+    inertia = doc["inertia"]
+    assert inertia["time_resolution"] == "one value per recording"
+    *areas, system = inertia["areas"]
+    assert [a["area"] for a in areas] == ["area 1", "area 2"] and system["area"] == "system"
+    used = {u["name"]: u for u in doc["units"]}
+    measured = [n for n, u in used.items() if u["verdict"] in ("identified", "weakly identified")]
+    assert system["units_online"] == 5 and system["units_measured"] == len(measured)
+    e = sum(used[n]["H_s"] * 100.0 for n in measured) + sum(
+        u["e_MWs"] for u in inertia["units"] if u["source"] != "measured")
+    assert system["E_MWs"] == pytest.approx(e) and system["E_commitment_MWs"] == pytest.approx(2550.0)
+    assert system["E_ci95"][0] <= 2550.0 <= system["E_ci95"][1], system
+    assert sum(a["E_MWs"] for a in areas) == pytest.approx(system["E_MWs"])
+    assert system["rocof_hz_per_s"] == pytest.approx(60.0 * 100.0 / 2 / system["E_MWs"])
+    assert (out / "inertia.csv").read_text().splitlines()[0].startswith("area,E_MWs,E_ci95_low")
+    assert (out / "inertia.png").stat().st_size > 10_000
 
 
 def test_damping_is_named_for_what_it_is(ieee14):

@@ -202,6 +202,8 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     ('fleet = "{run}"\n[stream]\nprotocol = "iec61850"', "stream.protocol"),
     ('fleet = "{run}"\n[stream]\nport = 1\nspeed = 2', "stream.speed"),
     ('fleet = "{run}"\n[stream.stations]\nnobody = "X"', "stream.stations.nobody"),
+    ('fleet = "{run}"\n[inertia]\nstale_s = -1', "inertia.stale_s"),
+    ('fleet = "{run}"\n[inertia]\nareas = "region"', "inertia.areas"),
 ])
 def test_bad_monitor_files_are_refused_in_one_line(example, tmp_path, capsys, text, key):
     config, _, _ = example

@@ -208,6 +208,12 @@ FLEET.toml (paths relative to it):
                  identified H and D; validates P/frequency only); solver = "tsit5" | "kvaerno5";
                  substeps (first step 1/substeps of a frame; adaptive Tsit5, rtol 1e-7);
                  ke_zero = "psse" | "literal" (a DC exciter's KE = 0)
+  [inertia]      the system inertia per area (an empty section: every default): areas =
+                 "area" | "zone" | {NAME = [buses]}, status = "raw" | "states.csv" (time_s,
+                 unit "BUS_ID", online), model_uncertainty (0.15), measured_errors = "shared" |
+                 "independent", largest_loss_mw, f0_hz, stale_s, floor_MWs, online_current_pu,
+                 grid_forming = {"BUS_ID" = virtual H}; writes DIR/inertia.csv, inertia.png and
+                 fleet.json "inertia" (one value per recording; README "System inertia")
 
 {SIMULATED}
 
@@ -364,6 +370,11 @@ MONITOR.toml:
                            # (0 identified, 1 weakly, 2 not excited, 3 failed), UNIT:ALARM
   [view]                   # a live web page: H with its interval over time per unit
   port = 8050
+  [inertia]                # the system inertia per area every update_s (else the fleet
+  largest_loss_mw = 1000.0 # file's [inertia]; keys as in `jaxdse fleet --help`): lines
+  update_s = 1.0           # {"t", "area", "E_MWs", "E_ci95", "measured_share",
+                           # "E_commitment_MWs", "rocof_hz_per_s", "units_online",
+                           # "units_measured"} in updates.jsonl, one per area and "system"
   (tile = K repeats the units K times, named as `jaxdse pmu-sim --tile K` names them:
    capacity tests.)
 

@@ -33,6 +33,7 @@ from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
 from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_plants, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
+from .fleet_inertia import fleet_inertia, inertia_document, inertia_figure, write_inertia_csv
 from .fleet_report import write_report
 from .progress import Progress
 from .report import playback_traces, summary_entry
@@ -106,6 +107,8 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
                   f"{val['result']}: {why}", file=stream)
     doc = fleet_document(fleet, entries, skipped, time.perf_counter() - t_start)
     out_dir.mkdir(parents=True, exist_ok=True)
+    if fleet.inertia is not None:
+        doc["inertia"] = _inertia(fleet, units, entries, out_dir, stream)
     write_report(out_dir, doc, traces, figures=fleet.figures)
     doc["wall_time_s"] = round(time.perf_counter() - t_start, 2)
     (out_dir / "fleet.json").write_text(json.dumps(doc, indent=2) + "\n")
@@ -120,6 +123,35 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
           f"median |H error| {_fmt(s['median_abs_H_error_percent'])} %. Model validation: "
           f"{_counts(s['validation'])} ({_counts(s['validation_models'], MODEL_WORDS)}). Wrote "
           f"{out_dir}/report.html, fleet.json, fleet.csv in {doc['wall_time_s']:.1f} s", file=stream)
+    return doc
+
+
+def _inertia(fleet: Fleet, units: list, entries: list[dict], out_dir: Path, stream) -> dict:
+    """[inertia]: E per area for the recording; writes inertia.csv (and inertia.png)."""
+    currents, t_end = {}, None
+    for p, rec, t0, _ in units:
+        scale = float(p.run.measurement.s_base_mva) / float(p.run.plant.machine.s_rated_mva)
+        currents[p.name] = float(np.nanmean(np.asarray(rec.i_mag_pu))) * scale
+        t = np.asarray(rec.t_s)
+        end = float(t0) + float(t[-1] - t[0])
+        t_end = end if t_end is None else max(t_end, end)
+    areas, contributions, notes = fleet_inertia(fleet, [u[0] for u in units], entries, currents, t_end)
+    for note in notes:
+        print(f"jaxdse: note: inertia: {note}", file=stream)
+    write_inertia_csv(out_dir / "inertia.csv", areas)
+    doc = inertia_document(fleet, areas, contributions, notes)
+    s = fleet.inertia.settings(fleet.raw.basfrq_hz)
+    if fleet.figures:
+        loss = "" if s.largest_loss_mw is None else f"; Hz/s: rate of change of frequency after losing " \
+            f"{s.largest_loss_mw:g} MW"
+        inertia_figure(out_dir / "inertia.png", areas, s.floor_MWs,
+                       f"Stored kinetic energy per area, {Path(fleet.raw.source).name}, one value for the "
+                       f"recording{loss}")
+    system = areas[-1]
+    share = "" if system.measured_share is None else f", {100 * system.measured_share:.0f} % measured"
+    print(f"[jaxdse] inertia: system E {system.E_MWs / 1e3:.4g} GW s (95 % {system.E_ci95[0] / 1e3:.4g}-"
+          f"{system.E_ci95[1] / 1e3:.4g}{share}; commitment {system.E_commitment_MWs / 1e3:.4g} GW s) in "
+          f"{len(areas) - 1} area(s): {out_dir}/inertia.csv", file=stream)
     return doc
 
 

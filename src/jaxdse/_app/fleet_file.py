@@ -3,7 +3,8 @@ plant's channels are found ([channels] patterns or [[unit]] tables), validated o
 
 Sections: [case] raw*, dyr*; [measurement] (as ``jaxdse run``'s, location "terminal" or
 "hv"); [channels] or [[unit]]; [observer], [settings], [identify] (as ``jaxdse run``'s);
-[criteria] the model validation's pass/fail limits; [output] figures.
+[criteria] the model validation's pass/fail limits; [output] figures; [inertia] the system
+inertia per area (:mod:`jaxdse._io.inertia`).
 
 A fleet never aborts for one unit: a plant whose case data are malformed, missing or
 implausible, or whose recording lacks one of its columns, is listed in ``Fleet.skipped`` with
@@ -25,6 +26,7 @@ from .._core.verdict import VerdictSettings
 from .._dyr.repair import carried_lines
 from .._io.config import GeneratorRun
 from .._io.errors import InputError
+from .._io.inertia import InertiaConfig, inertia_section
 from .._io.psse import DyrData, RawCase, merge_dyr, read_dyr, read_raw
 from .._io.readers import load_table
 from .._io.schema import (
@@ -47,7 +49,7 @@ LAYOUTS = ("per_machine", "step_up_branch")
 """How plants and their columns are found from [channels] (see ``FLEET_HELP`` in the CLI)."""
 ROLES = ("time", "frequency", "v_mag", "v_ang", "i_mag", "i_ang")
 TOP = {"case", "measurement", "channels", "unit", "observer", "settings", "identify", "criteria",
-       "output", "playback", "calibrate"}
+       "output", "playback", "calibrate", "inertia"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -99,6 +101,8 @@ class Fleet:
     """[playback]: the surrogate or the units' own .dyr models."""
     calibrate: CalibrateOptions = CalibrateOptions()
     """[calibrate]: events, parameters and bounds of ``jaxdse validate``."""
+    inertia: InertiaConfig | None = None
+    """[inertia]: the system inertia per area (None: not asked for)."""
     notes: tuple[str, ...] = ()
     """Records of the .raw/.dyr that were dropped or not used and belong to no plant (e.g. a
     .dyr record without a readable bus number): one line each."""
@@ -116,6 +120,7 @@ def load_fleet(path) -> Fleet:
                          + (f" but a run configuration (it has {', '.join(extra)})" if extra else "")
                          + f"; use `jaxdse run {path}`, or add [case]", key="case")
     no_unknown(path, data, TOP, "")
+    inertia = inertia_section(path, data["inertia"]) if "inertia" in data else None
     case = subtable(path, data, "case", "case")
     no_unknown(path, case, {"raw", "dyr", "q_axis_circuits"}, "case.")
     # false: the estimator leaves every GENROU/GENTPJ's q-axis circuits out (the transient model),
@@ -199,6 +204,7 @@ def load_fleet(path) -> Fleet:
                  settings=settings_section(path, subtable(path, data, "settings", "settings")),
                  identify=identify, verdict=verdict, criteria=criteria, figures=figures,
                  playback=playback, calibrate=calibrate,
+                 inertia=inertia,
                  notes=tuple(_one_line(n) for n in (*raw.problems, *dyr.problems)))
 
 

@@ -30,7 +30,9 @@ def source_units(path) -> Units:
 
         fleet = load_fleet(path)
         return Units([(p.name, p.run) for p in fleet.plants], [(s["name"], s["reason"]) for s in fleet.skipped],
-                     fleet.observer, fleet.settings, fleet.identify or IdentifySettings(), fleet.verdict)
+                     fleet.observer, fleet.settings, fleet.identify or IdentifySettings(), fleet.verdict,
+                     (fleet.raw, fleet.dyr, {p.name: (p.bus, tuple(m.id for m in p.members)) for p in fleet.plants},
+                      fleet.inertia))
     cfg = load_config(path)
     return Units([(g.name, g) for g in cfg.generators], [], cfg.observer, cfg.settings,
                  cfg.identify or IdentifySettings(), cfg.verdict)

@@ -26,7 +26,10 @@ drops or stays silent, so one stream's failure costs its units only. The main th
   reads back through the file readers and the same windowed identification: its last update
   equals the live one;
 * raises an alarm when a unit's identified H falls below ``[alarm] h_below_s`` and clears it
-  when H rises above that by ``hysteresis`` (a fraction), in the log and in ``updates.jsonl``.
+  when H rises above that by ``hysteresis`` (a fraction), in the log and in ``updates.jsonl``;
+* with ``[inertia]`` (in the monitor file, or else in the fleet file it names), writes the
+  system inertia per area every ``[inertia] update_s`` of stream time as ``updates.jsonl``
+  lines with an ``"area"`` (:mod:`.inertia`).
 """
 
 from __future__ import annotations
@@ -45,6 +48,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from .._io.errors import InputError
+from .._io.inertia import InertiaConfig, inertia_section
 from .._io.measurement import MAX_CURRENT_SAMPLE_PU_MACHINE, REPEATS_RARE, VOLTAGE_RANGE_PU
 from .._io.schema import no_unknown, read_toml, subtable, typed_value
 from . import c37118 as c3
@@ -120,10 +124,12 @@ class MonitorConfig:
     """[view] host, port of the live web page (None: no page)."""
     source_units: Units | None = None
     """The units of ``source`` and the estimator's settings it gives (:class:`~.pmu_sim.Units`)."""
+    inertia: InertiaConfig | None = None
+    """[inertia] of the monitor file (else of the fleet file); None: no system inertia."""
 
 
 STREAM_KEYS = {f.name for f in dataclasses.fields(StreamSpec)} | {"units"}
-TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish", "view"}
+TOP_KEYS = {"fleet", "update_s", "window_s", "stream", "alarm", "tile", "publish", "view", "inertia"}
 PUBLISH_KEYS = {"protocol", "host", "port", "idcode"}
 
 
@@ -148,6 +154,7 @@ def load_monitor(path, units_of) -> MonitorConfig:
     if window_s < update_s:
         raise InputError(path, f"window_s = {window_s} is shorter than update_s = {update_s}", key="window_s")
     alarm = subtable(path, data, "alarm", "alarm")
+    inertia = inertia_section(path, data["inertia"]) if "inertia" in data else None
     publish = None
     if "publish" in data:
         pub = subtable(path, data, "publish", "publish")
@@ -223,11 +230,13 @@ def load_monitor(path, units_of) -> MonitorConfig:
         f"{n}: in no [[stream]]'s units" for n in names if n not in owner)
     if not units:
         raise InputError(path, "no unit to monitor")
+    if inertia is None and est.case is not None:
+        inertia = est.case[3]
     return MonitorConfig(path, source, tuple(streams), units, update_s, window_s,
                          typed_value(path, float, alarm["h_below_s"], "alarm.h_below_s", 0)
                          if "h_below_s" in alarm else None,
                          typed_value(path, float, alarm.get("hysteresis", 0.05), "alarm.hysteresis", 0), notes,
-                         publish, view, est)
+                         publish, view, est, inertia)
 
 
 def tiled(runs: list, copies: int) -> list:
@@ -487,6 +496,8 @@ class _Stream:
         self.decoder_done = defaultdict(int)   # the reader's counts of the connections before this one
         self.decoder_now = {}                  # ... and of this one
         self.clock = StreamClock()
+        self.tracker = None                     # the system inertia's (Monitor with [inertia])
+        self.names = [u.name for u in units]
         self.ready = threading.Event()          # the configuration taken, the estimators compiled
         self.compile_s = 0.0                    # [s] the main thread spent compiling them
         self.unusable = np.zeros(len(units), np.int64)
@@ -648,6 +659,8 @@ class _Stream:
         if self.spec.frequency != "stream":
             f = np.full_like(f, np.nan)
         vm, va, im, ia = np.abs(v), np.angle(v), np.abs(i), np.angle(i)
+        if self.tracker is not None:
+            self.tracker.samples(self.names, im * self.machine_scale, usable, idx / self.rate, key=self.k)
         if self.file is not None:
             part = self.parts[-1]
             if part["index0"] is None:
@@ -724,6 +737,7 @@ class Monitor:
         self.streams = [_Stream(k, spec, [u for u in cfg.units if u.stream == k], names, cfg, self.est,
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
         self.alarms = {}
+        self.inertia_alarms = {}   # area -> E below the floor
         self.updates = 0
         self.latest = {}
         self.delays = []         # [s of stream time] per update, from the window's last frame
@@ -742,6 +756,13 @@ class Monitor:
             f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
             self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
                                        log=self.log, **opts)
+        self.inertia = None
+        if cfg.inertia is not None:
+            from .inertia import tracker_for
+
+            self.inertia = tracker_for(cfg.units, self.est, cfg.inertia, self.log)
+            for s in self.streams:
+                s.tracker = self.inertia
         self.view = None
         if cfg.view is not None:
             from .view import LiveView
@@ -761,6 +782,8 @@ class Monitor:
             if now is not None and timed:
                 self.monitor_s.append(stream.clock.since_newest(w))
         for u in updates:
+            if self.inertia is not None:
+                self.inertia.update(u)
             alarm = self._alarm(u)
             delay = wall = None
             if now is not None:
@@ -899,6 +922,8 @@ class Monitor:
                 if s.config is not None:
                     s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
                 self.emit(s.on_data(x), s)
+                if self.inertia is not None and s.released is not None:
+                    self._inertia_lines(self.inertia.tick(s.released / s.rate))
             if isinstance(x, c3.DataFrame) and len(self.processing) < MAX_TIMINGS:
                 self.processing.append(time.perf_counter() - t0)
         elif kind == "counts":
@@ -914,6 +939,23 @@ class Monitor:
             s.clock.restart()
             if s.counts["disconnects"] + s.counts["connect_failures"]:
                 self.log(f"stream {k}: reconnected to {x}")
+
+    def _inertia_lines(self, lines: list[dict]):
+        """The system inertia's lines to ``updates.jsonl``; the floor's alarm in the log."""
+        if not lines:
+            return
+        if self._jsonl is not None:
+            self._jsonl.write("".join(json.dumps(x) + "\n" for x in lines))
+            self._jsonl.flush()
+        floor = self.cfg.inertia.floor_MWs
+        for a in self.inertia.latest:
+            was = self.inertia_alarms.get(a.area, False)
+            if a.below_floor and not was:
+                self.log(f"ALARM inertia {a.area}: E {a.E_MWs / 1e3:.4g} GW s below the floor {floor / 1e3:g} GW s "
+                         f"at {_utc(lines[0]['t'])}")
+            elif was and not a.below_floor:
+                self.log(f"alarm cleared inertia {a.area}: E {a.E_MWs / 1e3:.4g} GW s at {_utc(lines[0]['t'])}")
+            self.inertia_alarms[a.area] = bool(a.below_floor)
 
     def _delays(self, recent: int | None = None) -> dict:
         """The delays from a frame's timestamp to its estimate: in stream time and in wall time."""
@@ -943,6 +985,10 @@ class Monitor:
                         for s in self.streams],
             "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
+            "inertia": None if self.inertia is None else [
+                {**a.line(None), "rocof_ci95": a.rocof_ci95, "rocof_reason": a.rocof_reason,
+                 "units_stale": a.units_stale, "units_without_h": a.units_without_h, "below_floor": a.below_floor}
+                for a in self.inertia.latest],
             "notes": list(self.cfg.notes),
             "counters": {**SUMMARY_KEYS, **COUNTS, **UNIT_COUNTS, "decoder": DECODER_COUNTS},
         }

@@ -142,6 +142,9 @@ class Units(NamedTuple):
     settings: object
     identify: object
     verdict: object
+    case: object = None
+    """A fleet file's case for the system inertia: (RawCase, DyrData, {unit: (bus, machine IDs)},
+    the fleet file's [inertia] or None); None for a run configuration."""
 
 
 def load_source(path, units: Units) -> Source:
