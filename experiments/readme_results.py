@@ -72,6 +72,12 @@ def block() -> str:
             f"{e2['median_rms_Q_percent_mbase']:.4f} % (largest {e2['max_rms_Q_percent_mbase']:.3f} %, "
             f"ANDES's speed factor on EFD); against ANDES's IEEEX1 (its EXDC2 without that factor) Q median "
             f"{nsf['median_rms_Q_percent_mbase']:.4f} %, largest {nsf['max_rms_Q_percent_mbase']:.3f} %.")
+    DEPARTURES = {  # the departures that new_models.py traces (its traces()), in short
+        "ESST4B": "ANDES's PI regulators track instead of holding at the non-windup limits of IEEE "
+                  "421.5 and PSS/E, `esst4b_pi.py`",
+        "ESDC1A": "ANDES simulates ESDC2A, whose VR limits scale with VT",
+        "EXAC1": "ANDES's trapezoid step over-integrates the alternator voltage VE while its "
+                 "anti-windup limiter pegs VR at VRMAX, `exac1_ve.py`"}
     nm = load("experiments/andes_bench/new_models.json")
     if nm:
         s = nm["summary"]
@@ -89,12 +95,13 @@ def block() -> str:
                       for e, v in nm.get("by_event", {}).items())
             + f"; event-window peak error within 10 % for {s['event_peak_within_10_percent']}; "
             f"{s['models_meeting_targets']} of {len(nm['by_model'])} models meet the targets"
-            + (f" (not simulated: {', '.join(s['not_simulated'])}). The fault's units above 0.5 % "
-               "and where ANDES departs from the PSS/E library (ESST4B: ANDES's PI regulators track "
-               "instead of holding at the non-windup limits of IEEE 421.5 and PSS/E, "
-               "`esst4b_pi.py`; ESDC1A: ANDES simulates ESDC2A, whose VR limits scale with VT) are "
-               "in `new_models.md`, with the units whose difference is not traced"
-               if "fault" in nm.get("by_event", {}) else "") + ".")
+            + (f" (not simulated: {', '.join(s['not_simulated'])})" if s.get("not_simulated") else "")
+            + (f". Units beyond 0.5 % of MBASE: {s['beyond_0.5_percent']}, traced to a named departure "
+               f"of ANDES from the PSS/E library: {s['beyond_0.5_percent_traced']} ("
+               + "; ".join(f"{x}: {DEPARTURES[x]}" for x in sorted({t["exciter"] for t in nm["beyond_target"]
+                                                                     if t["traced"]}))
+               + "); each unit, its departure and the evidence in `new_models.md`"
+               if "beyond_0.5_percent" in s and s["beyond_0.5_percent"] else "") + ".")
     fr = load("experiments/andes_bench/fleet_results.json")
     if fr:
         rows = fr["rows"]

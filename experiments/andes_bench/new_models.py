@@ -18,6 +18,10 @@ the same without the 3 frames after a switching step.
 Per event type and per model (each exciter; IEESGO over the units that carry it): units, recordings, median and
 largest RMS error of P and Q, the largest event-window peak error, against issue 33's targets
 (median <= 0.1 %, every unit <= 0.5 % of MBASE, event-window peak <= 10 % of the peak deviation).
+Every unit beyond 0.5 % of MBASE is listed with the departure of ANDES from the PSS/E library
+that its difference is traced to, from the evidence files of the scripts that isolate one
+block each (``traces``): ``esst4b_pi.py`` (ESST4B's PI), ``exac1_steps.py`` (ANDES venv) then
+``exac1_ve.py`` (EXAC1's alternator voltage under a pegged regulator); run them first.
 Writes new_models.json and new_models.md here.
 """
 
@@ -170,6 +174,55 @@ def model_stats(rows) -> dict:
     return out
 
 
+def _json(name):
+    path = HERE / name
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def traces(rows, variants) -> list:
+    """Every played-back unit beyond TARGET_MAX (P or Q), with the departure of ANDES from the
+    PSS/E library that its difference is traced to, from the evidence files, or "not traced":
+
+    - ESDC1A: the same unit read as ESDC2A (the model ANDES simulated) is within TARGET_MAX;
+    - ESST4B (``esst4b_pi.json``): ANDES's VR sat on a limit, and the tracking PI matches ANDES's
+      VR to a tenth of the RMS error of PSS/E's non-windup PI;
+    - EXAC1 (``exac1_ve.json``): ANDES's VE left its own trapezoid at steps with VR pegged, the
+      block diagram with those excess increments matches ANDES's EFD to a tenth of the error of
+      the block diagram alone, and jaxdse's EXAC1 is the block diagram (closer to it than that)."""
+    pi, ve = _json("esst4b_pi.json") or {"units": {}}, _json("exac1_ve.json") or {"units": {}}
+    out = []
+    for r in rows:
+        worst = max(r["rms_P_percent_mbase"], r["rms_Q_percent_mbase"])
+        if worst <= pb.TARGET_MAX:
+            continue
+        key, why = f"{r['case']} {r['tag']}", None
+        if r["exciter"] == "ESDC1A":
+            v = [x for x in variants if (x["case"], x["event"], x["tag"]) == (r["case"], r["event"], r["tag"])]
+            if v and max(v[0]["rms_P_percent_mbase"], v[0]["rms_Q_percent_mbase"]) <= pb.TARGET_MAX:
+                why = (f"ANDES simulates ESDC2A (VR limits times VT): read as ESDC2A, RMS P "
+                       f"{v[0]['rms_P_percent_mbase']:.4f} %, Q {v[0]['rms_Q_percent_mbase']:.4f} %")
+        elif r["exciter"] == "ESST4B" and r["event"] == pi.get("event") and key in pi["units"]:
+            u = pi["units"][key]
+            nw, tr = u["nonwindup"]["rms_err_vs_andes_pu"], u["tracking"]["rms_err_vs_andes_pu"]
+            if u["andes_frames_on_a_vr_limit"] > 0 and tr < nw / 10:
+                why = (f"ANDES's ESST4B PI tracks instead of holding at its non-windup limit "
+                       f"(esst4b_pi.py: VR RMS err {tr:.4f} pu tracking, {nw:.4f} pu non-windup)")
+        elif r["exciter"] == "EXAC1" and r["event"] == ve.get("event") and key in ve["units"]:
+            u = ve["units"][key]
+            bd, wx = u["block_diagram"]["max_abs_efd_err_pu"], u["with_andes_excess"]["max_abs_efd_err_pu"]
+            if (u["steps_with_excess_and_vr_pegged"] > 0 and wx < bd / 10
+                    and u["jaxdse_vs_block_diagram_max_abs_efd_pu"] < wx):
+                why = (f"ANDES's trapezoid over-integrates VE while its anti-windup limiter pegs VR "
+                       f"(exac1_ve.py: {u['steps_with_excess_and_vr_pegged']} steps, VE +"
+                       f"{u['excess_ve_total_pu']:.3f} pu; EFD max err {bd:.4f} pu block diagram, "
+                       f"{wx:.4f} pu with ANDES's excess)")
+        out.append({"case": r["case"], "event": r["event"], "tag": r["tag"], "exciter": r["exciter"],
+                    "rms_P_percent_mbase": r["rms_P_percent_mbase"],
+                    "rms_Q_percent_mbase": r["rms_Q_percent_mbase"], "traced": why is not None,
+                    "departure": why or "not traced"})
+    return out
+
+
 def _limits_text(lim: dict) -> str:
     """ANDES limiter flags of a row, shortest form: 'exciter ESAC1A.LA_lim upper 0.31 s'."""
     return "; ".join(f"{k} {v['seconds_after_event']:g} s" for k, v in lim.items()) or "-"
@@ -264,6 +317,12 @@ def report(doc) -> str:
             f"{v['max_event_peak_err_percent_of_dev']:.2f} ({v['max_event_peak_err_at']}) | "
             f"{v['max_event_peak_err_after_step_percent_of_dev']:.2f} | "
             f"{'yes' if v['meets_targets'] else 'no'} |")
+    lines += ["", f"Units beyond {pb.TARGET_MAX} % of MBASE (RMS P or Q): {s['beyond_0.5_percent']}, "
+              f"traced to a named departure of ANDES from the PSS/E library: "
+              f"{s['beyond_0.5_percent_traced']} (the evidence: the tables at the end):", "",
+              "| case | event | unit | exciter | RMS P [%] | RMS Q [%] | departure |", "|---|---|---|---|---|---|---|",
+              *[f"| {t['case']} | {t['event']} | {t['tag']} | {t['exciter']} | {t['rms_P_percent_mbase']:.4f} | "
+                f"{t['rms_Q_percent_mbase']:.4f} | {t['departure']} |" for t in doc["beyond_target"]]]
     lines += ["", "| case | event | unit | MBASE [MVA] | models (machine/exciter/PSS/governor) | "
               "RMS P [%] | RMS Q [%] | peak err P [% of dev] | peak err Q [% of dev] | "
               "max angle err [deg] | min VT [pu] | RMS EFD err [pu] | ANDES limits reached "
@@ -313,6 +372,34 @@ def report(doc) -> str:
                          f"{nw['rms_err_vs_andes_pu']:.4f}, {nw['final_vr_pu']:.4f} | "
                          f"{tr['rms_err_vs_andes_pu']:.4f}, {tr['final_vr_pu']:.4f} | "
                          f"{u['andes_final_vr_pu']:.4f} |")
+        if e.get("skipped"):
+            lines += ["", "Not isolated there: " + "; ".join(e["skipped"]) + "."]
+    ex = HERE / "exac1_ve.json"  # experiments/andes_bench/exac1_ve.py (SciPy, the block diagram)
+    if ex.exists():
+        e = json.loads(ex.read_text())
+        lines += ["", f"EXAC1 during the {e['event']}'s field forcing (`exac1_ve.py`, from ANDES's "
+                  "own variables at each integration step, `exac1_steps.py`): the steps whose "
+                  "alternator-voltage increment ΔVE exceeds the trapezoid of ANDES's recorded VR "
+                  f"and VFE by more than {e['excess_tol_pu']:g} pu, the VR at the step's start that "
+                  "the increment implies, and EFD of the PSS/E block diagram driven by ANDES's "
+                  "VT and LadIfd against ANDES's EFD (largest error after the event), as the "
+                  "block diagram has it and with ANDES's excess increments added; jaxdse's own "
+                  "EXAC1 driven the same way, against the block diagram:", "",
+                  "| unit | steps with VR pegged (ANDES) | steps with excess (pegged) | excess VE, "
+                  "total [pu] | implied VR at the step's start [pu] (VRMAX) | block diagram: "
+                  "max EFD err [pu] | with ANDES's excess: max EFD err [pu] | jaxdse's EXAC1 - "
+                  "block diagram: max EFD [pu] | ANDES peak EFD [pu] |",
+                  "|---|---|---|---|---|---|---|---|---|"]
+        for tag, u in e["units"].items():
+            iv = u["implied_vr_at_step_start_pu"]
+            rng = f"{min(iv):.1f} to {max(iv):.1f}" if iv else "-"
+            lines.append(f"| {tag} | {u['steps_with_vr_pegged']} | {u['steps_with_excess']} "
+                         f"({u['steps_with_excess_and_vr_pegged']}) | {u['excess_ve_total_pu']:.4f} | "
+                         f"{rng} ({u['vr_max_pu']:g}) | "
+                         f"{u['block_diagram']['max_abs_efd_err_pu']:.4f} | "
+                         f"{u['with_andes_excess']['max_abs_efd_err_pu']:.4f} | "
+                         f"{u['jaxdse_vs_block_diagram_max_abs_efd_pu']:.1e} | "
+                         f"{u['andes_peak_efd_pu']:.3f} |")
     lines += ["", f"Script wall time: {doc['wall_s']:.0f} s ({doc['machine']})."]
     return "\n".join(lines) + "\n"
 
@@ -323,7 +410,20 @@ def main():
                     help="a subset, for a quick look (the files written then hold only it)")
     ap.add_argument("--no-timing", action="store_true",
                     help="one call per structure (the wall time then includes the compilation)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="no playback: re-trace the units beyond 0.5 %% from the evidence files "
+                         "(esst4b_pi.json, exac1_ve.json) and rewrite the report from new_models.json")
     args = ap.parse_args()
+    if args.report_only:
+        doc = json.loads((HERE / "new_models.json").read_text())
+        done = [r for r in doc["rows"] if r.get("structure")]
+        doc["beyond_target"] = traces(done, doc["as_andes_simulates"])
+        doc["summary"]["beyond_0.5_percent"] = len(doc["beyond_target"])
+        doc["summary"]["beyond_0.5_percent_traced"] = sum(t["traced"] for t in doc["beyond_target"])
+        (HERE / "new_models.json").write_text(json.dumps(doc, indent=1) + "\n")
+        (HERE / "new_models.md").write_text(report(doc))
+        print(json.dumps(doc["beyond_target"], indent=1))
+        return
     t_start = time.perf_counter()
     settings = jd.PlaybackSettings(substeps=SUBSTEPS)
     rows, timing = run(settings, args.case, timed=not args.no_timing)
@@ -332,6 +432,7 @@ def main():
     done = [r for r in rows if r.get("structure")]
     by_model = model_stats(done)
     by_event = event_stats(done)
+    traced = traces(done, variants)
     summary = {
         "machine_recordings": sum(r["tag"] is not None for r in rows), "played_back": len(done),
         "units": len({(r["case"], r["tag"]) for r in rows if r["tag"] is not None}),
@@ -345,12 +446,14 @@ def main():
                                                            for r in done)),
         "angle_within_0.5_deg": int(sum(r["max_angle_err_deg"] <= pb.TARGET_ANGLE for r in done)),
         "models_meeting_targets": int(sum(v["meets_targets"] for v in by_model.values())),
+        "beyond_0.5_percent": len(traced), "beyond_0.5_percent_traced": sum(t["traced"] for t in traced),
     }
     doc = {"cases": args.case, "settings": {"solver": settings.solver, "substeps": settings.substeps,
                         "ke_zero": "psse (package default)"},
            "targets": {"median_rms_percent_mbase": pb.TARGET_MEDIAN, "max_rms_percent_mbase": pb.TARGET_MAX,
                        "event_peak_percent_of_dev": pb.TARGET_PEAK},
-           "timed": not args.no_timing, "summary": summary, "by_event": by_event, "by_model": by_model, "as_andes_simulates": variants, "timing": timing, "rows": rows,
+           "timed": not args.no_timing, "summary": summary, "by_event": by_event, "by_model": by_model, "as_andes_simulates": variants,
+           "beyond_target": traced, "timing": timing, "rows": rows,
            "machine": f"{jax.devices()[0].platform}, {len(__import__('os').sched_getaffinity(0))} cores",
            "wall_s": time.perf_counter() - t_start}
     (HERE / "new_models.json").write_text(json.dumps(doc, indent=1) + "\n")
