@@ -162,11 +162,11 @@ def test_voltage_and_frequency_steps_match_the_scipy_block_diagram():
 def test_deep_dip_reaches_the_current_limit_and_freezes_the_controls():
     unit = _models()
     unit = eqx.tree_at(lambda m: (m.electrical.kqv, m.electrical.i_max_pu),
-                       unit, (jnp.asarray(4.0), jnp.asarray(1.1)))
+                       unit, (jnp.asarray(4.0, dtype=float), jnp.asarray(1.1, dtype=float)))
     y0, refs = _start(unit)
-    ts = jnp.linspace(0.0, 0.6, 121)
+    ts = jnp.linspace(0.0, 0.6, 201)                              # the shapes of the step test
     v_steps = jnp.asarray([[0.2, 0.55 - V0], [0.4, V0 - 0.55]])   # |V| = 0.55 for 0.2 s
-    ys, sig = _simulate(unit, y0, refs, ts, v_steps, jnp.zeros((1, 2)))
+    ys, sig = _simulate(unit, y0, refs, ts, v_steps, jnp.zeros((2, 2)))
     t = np.asarray(ts)
     inside = (t > 0.2 + 1e-6) & (t < 0.4 - 1e-6)
     outside = (t < 0.2 - 1e-6) | (t > 0.4 + 1e-6)
