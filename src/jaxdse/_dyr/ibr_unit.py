@@ -15,8 +15,9 @@ from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array
+from jaxtyping import Array, Float
 
+from .._base.fields import as_float
 from .._models.ibr import (
     REECA1,
     REGCA1,
@@ -71,6 +72,9 @@ class IbrUnit(eqx.Module):
     converter: REGCA1
     electrical: REECA1
     plant: REPCA1 | None = None
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * jnp.pi * 60.0)
+    """Nominal angular frequency [rad/s]: a playback turns the recorded angle's slope into the
+    frequency deviation with it (as for a machine)."""
 
     @property
     def sizes(self) -> tuple[int, int, int]:

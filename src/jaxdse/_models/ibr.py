@@ -146,8 +146,10 @@ class REGCA1(eqx.Module):
         """d[Ip, Iq, Vf]/dt at |V| = ``vt`` [pu] with the commands Ipcmd, Iqcmd [pu]."""
         ip, iq, vf = state[0], state[1], state[2]
         ceiling = self.lvpl(vf)
-        d_ip = jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s)
-        d_ip = jnp.where(ip > ceiling, (ceiling - ip) / LVPL_RESET_S, _blocked(ip, d_ip, -jnp.inf, ceiling))
+        # the lag with its up rate, and the ceiling as a fast pull (continuous in Ip: no chattering
+        # of a solver's steps between "blocked" and "reset" at the limit)
+        d_ip = jnp.minimum(jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s),
+                           (ceiling - ip) / LVPL_RESET_S)
         d_iq = jnp.clip((iqcmd - iq) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
         _, d_vf = _lag(vt, vf, self.t_fltr_s)
         return jnp.stack([d_ip, d_iq, d_vf])
