@@ -280,6 +280,7 @@ def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
     assert full.missing == [] and isinstance(full.unit, IbrUnit)
     assert full.structure == ("REGCA1", "REECA1", "REPCA1")
     assert any("taken at the terminal" in n for n in full.notes)
+    assert not any("Thld" in n for n in full.notes)
     b = ibr_model(dyr, 9, "1")
     assert b.unit is None and any("REECB1 is not simulated" in m for m in b.missing)
     alone = ibr_model(dyr, 10, "1")

@@ -133,6 +133,13 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
         if plant is not None and (plant.regulated_bus not in (0, bus) or plant.branch[0] != 0):
             out.notes.append(f"REPCA1: regulated bus {plant.regulated_bus} and branch "
                              f"{plant.branch[0]}-{plant.branch[1]} taken at the terminal")
+        elec = parts["electrical"]
+        if float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0:
+            out.notes.append(f"REECA1: Thld = {float(elec.thld_s):g}, Thld2 = {float(elec.thld2_s):g}: "
+                             "the post-dip hold timers are not modelled (taken as 0)")
+        if not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
+            out.notes.append(f"REECA1: Vref1 = {float(elec.v_ref1_pu):g} replaced by the value that "
+                             "holds the initial state")
         if "plant" not in out.models:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
     return out
