@@ -21,6 +21,7 @@ from jaxtyping import Array, Float
 
 from .._core.lti import zero_phase_lowpass
 from .._core.signals import jumps
+from .ibr_unit import IbrReferences, IbrUnit
 from .stiff import kvaerno5
 from .unit import DyrUnit, UnitInputs, UnitReferences
 
@@ -97,14 +98,14 @@ class PlaybackResult(eqx.Module):
     q_pu: Array
     """Reactive power out of the terminal [pu]."""
     omega_pu: Array
-    """Rotor speed [pu]."""
+    """Rotor speed [pu] (NaN for an inverter-based plant: not applicable)."""
     delta_rad: Array
-    """Rotor angle (q axis) in the nominal frame [rad]."""
+    """Rotor angle (q axis) in the nominal frame [rad] (NaN for an inverter-based plant)."""
     efd_pu: Array
-    """Field voltage [pu]."""
+    """Field voltage [pu] (NaN for an inverter-based plant)."""
     tm_pu: Array
-    """Mechanical torque [pu]."""
-    references: UnitReferences
+    """Mechanical torque [pu] (NaN for an inverter-based plant)."""
+    references: UnitReferences | IbrReferences
     ok: Array
     """True when the solver reached the end with finite states."""
 
@@ -227,12 +228,15 @@ def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> Terminal
     return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
 
 
-def play_back(unit: DyrUnit, series: TerminalSeries,
+def play_back(unit: DyrUnit | IbrUnit, series: TerminalSeries,
               settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
-    """Simulate ``unit`` with the recorded terminal voltage imposed (PLBVFU1 convention)."""
+    """Simulate ``unit`` (a machine's :class:`DyrUnit` or an inverter-based plant's
+    :class:`IbrUnit`) with the recorded terminal voltage imposed (PLBVFU1 convention); the
+    frequency deviation an inverter-based plant sees is the recorded angle's slope."""
     series = steady_start(series, settings)
     ts = series.t_s
-    omega_s = unit.machine.omega_s_rad_s
+    ibr = isinstance(unit, IbrUnit)
+    omega_s = unit.omega_s_rad_s if ibr else unit.machine.omega_s_rad_s
     u0, i_re0, i_im0 = initial_operating_point(series, settings)
     y0, refs = unit.initial_state(u0, i_re0, i_im0)
     inputs = _input_function(series, settings, omega_s)
@@ -270,12 +274,18 @@ def play_back(unit: DyrUnit, series: TerminalSeries,
         ys, solved = sol.ys, sol.result == diffrax.RESULTS.successful
 
     def outputs(s, y):
+        if ibr:
+            sig = unit.signals(y, inputs(*_frame_of(s)), refs)
+            return sig.p_pu, sig.q_pu, jnp.nan * sig.p_pu, jnp.nan * sig.p_pu
         out, efd, tm, _ = unit.signals(y, inputs(*_frame_of(s)), refs)
         return out.p_pu, out.q_pu, efd, tm
 
     p, q, efd, tm = jax.vmap(outputs)(jnp.arange(ts.shape[0], dtype=ts.dtype), ys)
-    m = unit.machine.n_states
     ok = solved & jnp.all(jnp.isfinite(ys))
+    if ibr:
+        return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=efd, delta_rad=efd, efd_pu=efd,
+                              tm_pu=tm, references=refs, ok=ok)
+    m = unit.machine.n_states
     return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=ys[:, m - 1], delta_rad=ys[:, m - 2],
                           efd_pu=efd, tm_pu=tm, references=refs, ok=ok)
 
