@@ -26,17 +26,19 @@ from .._dyr.playback import (
     play_back,
     steady_start,
 )
-from .._dyr.records import UnitModel, unit_model
+from .._dyr.records import UnitModel, ibr_model, unit_model
 from .._dyr.stiff import modes, stiff_note, too_stiff
 from .._many import programs
 from .._many.runner import _same_context_in_threads, threads
 from .._many.waits import COMPILE_LIMIT_S, Expired, Task, bounded
 from .._models.exciters import EXCITERS
+from .._models.ibr import IBR_MODELS
 from .._models.stabilisers import STABILISERS
 
 PLAYBACK_MODELS = ("surrogate", "dyr")
-SIMULATED_RECORDS = frozenset({*EXCITERS, *STABILISERS})
-"""Record models that the .dyr playback simulates beyond the machines and governors."""
+SIMULATED_RECORDS = frozenset({*EXCITERS, *STABILISERS, *IBR_MODELS})
+"""Record models that the .dyr playback simulates beyond the machines and governors (the
+inverter-based plants' included)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,15 +144,24 @@ def _shares(x: np.ndarray, mbase: np.ndarray) -> np.ndarray:
 
 
 def plant_model(raw, dyr, plant, options: PlaybackOptions = PlaybackOptions()) -> PlantModel:
-    """The :class:`PlantModel` of a fleet plant (host side)."""
-    units = [unit_model(dyr, raw, plant.bus, m.id, ke_zero=options.ke_zero) for m in plant.members]
+    """The :class:`PlantModel` of a fleet plant (host side): its units' machine records, or an
+    inverter-based plant's own records (:func:`~jaxdse._dyr.records.ibr_model`; without a model
+    for each unit the plant is not played back, ``fallback`` says why)."""
+    if plant.ibr:
+        units = [ibr_model(dyr, plant.bus, m.id) for m in plant.members]
+        w_s = 2 * np.pi * raw.basfrq_hz
+        for u in units:
+            if u.unit is not None:
+                u.unit = eqx.tree_at(lambda x: x.omega_s_rad_s, u.unit, jnp.asarray(w_s))
+    else:
+        units = [unit_model(dyr, raw, plant.bus, m.id, ke_zero=options.ke_zero) for m in plant.members]
     gens = [raw.generator(plant.bus, m.id) for m in plant.members]
     mbase = np.array([g.mbase_mva for g in gens])
     out = PlantModel(units, mbase, _shares(np.array([g.pg_mw for g in gens]), mbase),
                      _shares(np.array([g.qg_mvar for g in gens]), mbase))
     missing = [line for u in units for line in u.missing]
     if missing:
-        out.fallback = "surrogate played back: " + "; ".join(missing)
+        out.fallback = ("not played back: " if plant.ibr else "surrogate played back: ") + "; ".join(missing)
     return out
 
 
@@ -296,7 +307,8 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
                 dt = float(series.t_s[1] - series.t_s[0])
                 if too_stiff(fastest, dt / settings.substeps):
                     stiff.add((name, k))
-                    notes[name].append(f"unit {k + 1} ({jobs[name][0].units[k].models['machine']}): "
+                    models = jobs[name][0].units[k].models
+                    notes[name].append(f"unit {k + 1} ({models.get('machine', models.get('converter'))}): "
                                        + stiff_note(fastest, dt / settings.substeps, "Tsit5"))
     implicit = dataclasses.replace(options, solver="kvaerno5").settings
     order = grouped(flat, key=lambda it: (it[0], it[1]) in stiff)
@@ -330,7 +342,8 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
 def _plant_playback(pm: PlantModel, rs: list) -> PlantPlayback:
     """The plant's playback: its units' (:class:`_Played`) MBASE-weighted sum."""
     w = pm.mbase_mva / np.sum(pm.mbase_mva)
-    omega_s = float(pm.units[0].unit.machine.omega_s_rad_s)
+    unit = pm.units[0].unit
+    omega_s = float(unit.machine.omega_s_rad_s if hasattr(unit, "machine") else unit.omega_s_rad_s)
     return PlantPlayback(p_pu=sum(wk * r.p_pu for wk, r in zip(w, rs)),
                          q_pu=sum(wk * r.q_pu for wk, r in zip(w, rs)),
                          x2_rad_s=sum(wk * (r.omega_pu - 1.0) for wk, r in zip(w, rs)) * omega_s,

@@ -34,6 +34,7 @@ from .._version import __version__
 from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_plants, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
 from .fleet_inertia import fleet_inertia, inertia_document, inertia_figure, write_inertia_csv
+from .fleet_plants import NO_ROTOR
 from .fleet_report import write_report
 from .progress import Progress
 from .report import playback_traces, summary_entry
@@ -92,13 +93,13 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     done = {}
     for name, dyr in dyr_playbacks(fleet, [u[0] for u in units], assessed):
         (p, _, _, quality), a = units[index[name]], assessed[index[name]]
-        done[name] = (_traces(a.estimate, a.replay, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
+        done[name] = (fleet_traces(p, a, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
         progress.step(f"assessed {p.name}")
     entries, traces = [], {}
     for p, *_ in units:
         traces[p.name], entry = done[p.name]
         entries.append(entry)
-        if entry["verdict"] != "identified":
+        if entry["verdict"] not in ("identified", "not applicable"):
             why = "; ".join(v for key, v in entry["reasons"].items() if key not in NOTES) or "see fleet.json"
             print(f"jaxdse: warning: {p.name}: H {entry['verdict']}: {why}", file=stream)
         if (val := entry["validation"])["result"] != "pass":
@@ -192,11 +193,11 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
     ident_info = e.get("identification", {})
     half = ident_info.get("relative_ci_percent")
     smape = e["smape_percent"]
-    traces = _traces(a.estimate, a.replay, dyr)
+    traces = fleet_traces(p, a, dyr)
     m = p.run.plant.machine
     validation = validation_entry(traces, p, criteria, dyr)
     damping = damping_entry(e, p)
-    return {
+    entry = {
         "name": p.name, "bus": p.bus, "bus_kv": float(m.v_rated_kv), "s_mva": float(m.s_rated_mva),
         "H_s": h, "H_ci95": [lo, hi], "H_reference_s": href,
         "H_error_percent": None if h is None else 100.0 * (h - href) / href,
@@ -228,6 +229,35 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "identification": ident_info, "online": e["online"], "t_ref_pu": e["t_ref_pu"],
         "n_samples": e["n_samples"], "duration_s": e["duration_s"], "data_quality": quality,
     }
+    return ibr_entry(entry, p) if p.ibr else entry
+
+
+IBR_SCOPE = ("MOD-026-2's two checks on the plant's own PSS/E records, the recorded voltage phasor "
+             "and the frequency from its angle imposed: active power against frequency, reactive "
+             "power against voltage")
+IBR_CHANNELS = ("P_t", "Q_t")
+"""An inverter-based plant's judged channels: it has no rotor speed."""
+
+
+def ibr_entry(entry: dict, p: FleetPlant) -> dict:
+    """An inverter-based plant's fleet.json entry: H and D ``not applicable`` (no rotor; the
+    swing-equation estimator's numbers for the nominal machine that carries its recording are
+    not reported), the plant's records in place of the machine's."""
+    why = {"no_rotor": NO_ROTOR}
+    entry.update({
+        "plant_type": "inverter-based",
+        "H_s": None, "H_ci95": [None, None], "H_reference_s": None, "H_error_percent": None,
+        "D": None, "D_ci95": None, "D_verdict": "not applicable", "verdict": "not applicable",
+        "reasons": why,
+        "damping": {"verdict": "not applicable", "reasons": [NO_ROTOR]},
+        "interval": {k: None for k in entry["interval"]},
+        "parameters": {}, "identification": {}, "online": {"H_s": None, "D": None},
+        "t_ref_pu": None, "machine": None, "governor_models": [],
+        "units": [{**u, "h_s": None} for u in entry["units"]],
+        "estimator": NO_ROTOR + ": the swing-equation estimator (H, D) is not applied",
+    })
+    entry.pop("surrogate_playback_rms_percent_mbase", None)   # a machine's surrogate: not applicable
+    return entry
 
 
 def damping_entry(e: dict, p: FleetPlant) -> dict:
@@ -269,6 +299,8 @@ def validation_entry(traces: dict, p: FleetPlant, criteria: dict, dyr: DyrOutcom
     3rd-order model with the identified H and D, asked for or the fallback), ``scope``,
     ``reasons`` (why it fails or is not judged) and the window ``scores``."""
     own = dyr is not None and dyr.playback is not None
+    if p.ibr:
+        return _ibr_validation(traces, p, criteria, dyr)
     channels = WINDOW_CHANNELS if own else SURROGATE_CHANNELS
     measured, replayed = ({k: traces[k][j] for k in channels} for j in (0, 1))
     reasons: list[str] = []
@@ -296,6 +328,30 @@ def validation_entry(traces: dict, p: FleetPlant, criteria: dict, dyr: DyrOutcom
             "windows": None if scores is None else scores.as_dict()}
 
 
+def _ibr_validation(traces: dict, p: FleetPlant, criteria: dict, dyr: DyrOutcome | None) -> dict:
+    """An inverter-based plant's validation: P and Q of its own records' playback by window
+    (``IBR_SCOPE``); not judged where its records are not played back (the surrogate is a
+    machine's, and does not apply)."""
+    scores, reasons = None, []
+    if dyr is None:
+        reasons.append("an inverter-based plant is validated with its own records only "
+                       "([playback] model = \"dyr\"); the surrogate is a synchronous machine's")
+    elif dyr.playback is None:
+        reasons.append(dyr.model.fallback)
+    elif not dyr.playback.ok:
+        reasons.append("the .dyr playback did not reach the end (solver failure or non-finite states)")
+    else:
+        measured, replayed = ({k: traces[k][j] for k in IBR_CHANNELS} for j in (0, 1))
+        scores = window_scores(traces["time_s"], measured, replayed, _channel_scale(p),
+                               window_criteria(criteria))
+        reasons += scores.reasons
+    played = scores is not None
+    result = ("not judged" if not played or scores.onset_s is None else "pass" if not reasons else "fail")
+    return {"result": result, "model": "dyr", "scope": IBR_SCOPE + ("" if played else " (not played back)"),
+            "reasons": reasons, "channels": list(IBR_CHANNELS),
+            "windows": None if scores is None else scores.as_dict()}
+
+
 def window_criteria(criteria: dict) -> WindowCriteria:
     """The window thresholds of a fleet's [criteria]."""
     names = {f.name for f in dataclasses.fields(WindowCriteria)}
@@ -317,6 +373,16 @@ def _rms_percent(traces: dict, p: FleetPlant) -> dict:
         e = e[np.isfinite(e)]
         out[k] = float(scale[k] * np.sqrt(np.mean(e**2))) if e.size else None
     return out
+
+
+def fleet_traces(p: FleetPlant, a: Assessment, dyr: DyrOutcome | None) -> dict:
+    """The unit page's traces (:func:`_traces`); for an inverter-based plant also the recorded
+    |V| ("V_t": its Q/V panel; nothing simulates it, the recorded voltage is imposed)."""
+    traces = _traces(a.estimate, a.replay, dyr)
+    if p.ibr:
+        v = np.asarray(a.estimate.trajectories.v_t_pu)
+        traces["V_t"] = (v, np.full_like(v, np.nan))
+    return traces
 
 
 def _pct(x):
@@ -404,7 +470,7 @@ def fleet_accounting(fleet: Fleet, skipped: list[dict]) -> dict:
         g = a.generator
         key = (g.bus, g.id.strip().upper())
         row = a.as_dict()
-        if a.category in UNIT_CATEGORIES:
+        if a.category in UNIT_CATEGORIES or key in member:   # an inverter-based plant's too
             if key in member:
                 in_fleet += 1
                 continue

@@ -42,7 +42,16 @@ from .._io.schema import (
     typed_value,
 )
 from .dyr_fleet import CalibrateOptions, PlaybackOptions
-from .fleet_plants import Member, generator_run, governor_sets, governor_slots, plant_units
+from .fleet_plants import (
+    Member,
+    PlantUnits,
+    generator_run,
+    governor_sets,
+    governor_slots,
+    ibr_generator_run,
+    ibr_members,
+    plant_units,
+)
 from .windows import WindowCriteria
 
 LAYOUTS = ("per_machine", "step_up_branch")
@@ -77,6 +86,10 @@ class FleetPlant:
     """The changes ``jaxdse check --repair`` made to the plant's records (the .dyr's
     ``/ jaxdse repair:`` lines), one line each naming the record, the CON, the original and the
     repaired value and why. The fleet.json entry's ``repairs``; the unit page lists them."""
+    ibr: bool = False
+    """An inverter-based plant (its units' records REGCA1, REECA1, ...; no machine record): no
+    rotor, so no H or D; validated by its own records' playback (P against frequency, Q against
+    voltage)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,6 +175,9 @@ def load_fleet(path) -> Fleet:
     for name, bus, ids, columns, direction in found:
         units = plant_units(raw, dyr, bus, ids, q_axis_circuits=q_axis)
         why = units.skip_reason()
+        ibr = ibr_members(raw, dyr, bus, ids) if not units.units and not units.problems else []
+        if ibr:   # an inverter-based plant: its own records only (no rotor)
+            why = None
         if why is None:
             try:
                 spec = measurement_section(path, {**meas, "columns": columns,
@@ -172,10 +188,20 @@ def load_fleet(path) -> Fleet:
         if why is not None:
             skipped.append(_skip(name, bus, why, ids))
             continue
-        candidates.append((name, bus, units, spec))
-    slots = governor_slots([governor_sets(c[2].units) for c in candidates])
+        candidates.append((name, bus, ibr or units, spec))
+    slots = governor_slots([governor_sets(c[2].units) for c in candidates if isinstance(c[2], PlantUnits)])
     built = []
     for name, bus, units, spec in candidates:
+        if not isinstance(units, PlantUnits):
+            try:
+                run = ibr_generator_run(name, bus, units, spec, raw, slots)
+            except (InputError, ValueError, ArithmeticError) as e:
+                skipped.append(_skip(name, bus, f"plant data: {e}", [m.id for m in units]))
+                continue
+            built.append(FleetPlant(name, bus, tuple(units), (), run, ibr=True,
+                                    repairs=tuple(carried_lines(r for m in units
+                                                                for r in dyr.unit_records(bus, m.id)))))
+            continue
         try:
             run, notes = generator_run(name, bus, units.units, spec, raw, slots)
         except (InputError, ValueError, ArithmeticError) as e:   # a check missed: still one plant

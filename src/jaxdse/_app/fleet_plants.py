@@ -34,6 +34,7 @@ import numpy as np
 from .._core.machine import Machine, QAxisCircuits
 from .._core.mapping import AuxiliarySystem, Transformer
 from .._core.plant import Plant
+from .._dyr.records import PSSE_IBR_MODELS, is_ibr
 from .._io.config import GeneratorRun, governor_max_pu
 from .._io.errors import InputError
 from .._io.psse import (
@@ -319,3 +320,51 @@ Q_AXIS_CONS = {"xq1_pu": "X'q", "xq2_pu": "X''d", "xl_pu": "Xl", "tq01_s": "T'qo
 def _line(err) -> str:
     """An exception's message on one line."""
     return " ".join(str(err).split())
+
+
+# --- inverter-based plants --------------------------------------------------------------------
+
+NO_ROTOR = "not applicable: an inverter-based plant has no rotor"
+"""H's and D's verdict (and its reason) for an inverter-based plant."""
+
+
+def ibr_members(raw: RawCase, dyr: DyrData, bus: int, ids) -> list[Member]:
+    """The in-service generators on ``bus`` (those of ``ids``; None: all) whose .dyr records
+    are an inverter-based plant's (REGCA1, REECA1, ...; ``is_ibr``) and which have no machine
+    record, as :class:`Member` (model: the converter record's; no H, no governor)."""
+    wanted = None if ids is None else {str(i).strip().upper() for i in ids}
+    out, seen = [], set()
+    for g in raw.generators:
+        key = g.id.strip().upper()
+        if g.bus != bus or g.stat != 1 or key in seen or (wanted is not None and key not in wanted):
+            continue
+        seen.add(key)
+        recs = dyr.unit_records(bus, g.id)
+        if is_ibr(dyr, bus, g.id) and not any(r.kind == "machine" for r in recs):
+            conv = next((r.model for r in recs if PSSE_IBR_MODELS.get(r.model) == "converter"), "-")
+            out.append(Member(id=g.id, model=conv, mbase_mva=g.mbase_mva, h_s=float("nan"),
+                              governor=None))
+    return out
+
+
+def ibr_generator_run(name, bus, members: list[Member], spec, raw: RawCase,
+                      slots: tuple[str, ...]) -> GeneratorRun:
+    """The :class:`GeneratorRun` that carries an inverter-based plant's recording through the
+    fleet's reading and terminal mapping (per unit on the sum of its MBASE, the bus kV, the
+    step-up transformer where the PMU is on its HV side). Its machine is a nominal one of that
+    rating: the swing-equation estimator's H and D of it are not reported (``NO_ROTOR``); the
+    plant is judged by its own records' playback only."""
+    s = sum(m.mbase_mva for m in members)
+    machine = Machine(s_rated_mva=s, v_rated_kv=raw.bus_kv(bus), f_nominal_hz=raw.basfrq_hz)
+    governor = WeightedGovernor(tuple(GOVERNORS[t]() for t in slots), [0.0] * len(slots))
+    plant = Plant(machine=machine, governor=governor, s_base_mva=spec.s_base_mva,
+                  h_model_error=float("inf"))
+    if spec.location == "hv":
+        gsu = raw.step_up_transformer(bus)
+        if gsu is None:
+            raise InputError(raw.source, f"plant {name}: no step-up transformer at bus {bus}, which "
+                             "location = \"hv\" needs")
+        plant = eqx.tree_at(lambda p: (p.transformer, p.aux), plant,
+                            (Transformer(**transformer_kwargs(gsu, raw)), AuxiliarySystem(p_as_max_mw=0.0)))
+    return GeneratorRun(name=name, role="estimate", measurement=spec, plant=plant,
+                        h_reference_s=float("nan"))

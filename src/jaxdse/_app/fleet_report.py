@@ -16,11 +16,11 @@ import numpy as np
 from .._core.verdict import NOTES, VERDICTS
 
 COLOURS = {"identified": "#1a9850", "weakly identified": "#fdae61", "not identified": "#d73027",
-           "failed": "#7f7f7f"}
-"""H's verdict -> colour (figures and table)."""
+           "failed": "#7f7f7f", "not applicable": "#bdbdbd"}
+"""H's verdict -> colour (figures and table); "not applicable": an inverter-based plant."""
 VALIDATION_COLOURS = {"pass": "#1a9850", "fail": "#d73027", "not judged": "#7f7f7f"}
 D_COLOURS = {"identified": "#1a9850", "negative": "#8e44ad", "not identified": "#d73027",
-             "failed": "#7f7f7f"}
+             "failed": "#7f7f7f", "not applicable": "#bdbdbd"}
 """D's verdict -> colour."""
 """The model validation's result -> colour."""
 MODEL_NAMES = {"dyr": "own .dyr records", "surrogate": "surrogate (P only)"}
@@ -63,11 +63,15 @@ def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -
         playback = PlaybackFigure()
         try:
             for e in units:
-                playback.draw_unit(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
+                if e.get("plant_type") == "inverter-based":
+                    ibr_figure(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
+                else:
+                    playback.draw_unit(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
         finally:
             playback.close()
     for e in units:
-        (out_dir / "units" / f"{e['name']}.html").write_text(unit_page(e, doc, figures))
+        page = ibr_unit_page if e.get("plant_type") == "inverter-based" else unit_page
+        (out_dir / "units" / f"{e['name']}.html").write_text(page(e, doc, figures))
     (out_dir / "report.html").write_text(fleet_page(doc, figures))
     (out_dir / "report.md").write_text(fleet_markdown(doc))
 
@@ -89,6 +93,8 @@ def plot_overview(units: list[dict], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(max(7.0, 0.42 * len(units) + 2), 4.6))
     x = np.arange(len(units))
     for k, e in enumerate(units):
+        if e["H_reference_s"] is None:   # an inverter-based plant: no H
+            continue
         colour = COLOURS[e["verdict"]]
         h, (lo, hi) = e["H_s"], e["H_ci95"]
         if h is not None and math.isfinite(h):
@@ -97,8 +103,8 @@ def plot_overview(units: list[dict], path: Path) -> None:
             ax.plot([k, k], [bottom, top], color=colour, lw=2.5, alpha=0.8)
             ax.plot(k, h, "o", color=colour, ms=6, mec="k", mew=0.5)
         ax.plot([k - 0.3, k + 0.3], [e["H_reference_s"]] * 2, color="k", lw=1.5)
-    refs = [e["H_reference_s"] for e in units]
-    ax.set_ylim(0, 2.2 * max(refs))
+    refs = [e["H_reference_s"] for e in units if e["H_reference_s"] is not None]
+    ax.set_ylim(0, 2.2 * max(refs) if refs else 1.0)
     ax.set_xticks(x, [e["name"] for e in units], rotation=60, ha="right", fontsize=8)
     ax.set_ylabel("inertia H [s, plant base]")
     ax.grid(axis="y", alpha=0.3)
@@ -273,10 +279,16 @@ def _vbadge(e: dict) -> str:
 def _attention(units: list[dict]) -> list[dict]:
     """Units to look at first: H not identified or the model validation not passed; worst of
     the two first (H's verdict, then the validation), then the largest |H error|."""
-    todo = [e for e in units if e["verdict"] != "identified" or e["validation"]["result"] != "pass"]
+    todo = [e for e in units if e["verdict"] not in ("identified", "not applicable")
+            or e["validation"]["result"] != "pass"]
     order = {"fail": 0, "not judged": 1, "pass": 2}
-    return sorted(todo, key=lambda e: (-VERDICTS.index(e["verdict"]), order[e["validation"]["result"]],
+    return sorted(todo, key=lambda e: (-_rank(e["verdict"]), order[e["validation"]["result"]],
                                        -abs(e["H_error_percent"] or 0.0)))
+
+
+def _rank(verdict: str) -> int:
+    """H's verdict in order (``VERDICTS``), "not applicable" (no rotor) before all."""
+    return VERDICTS.index(verdict) if verdict in VERDICTS else -1
 
 
 def _mode(m: dict) -> str:
@@ -310,7 +322,7 @@ def fleet_page(doc: dict, figures: bool) -> str:
             f"{_ci(e)}</td><td>{_f(e['H_reference_s'])}</td>"
             f"<td data-sort=\"{_f(abs(err) if err is not None else None, '.3f')}\">"
             f"{_f(err, '+.1f')}</td>"
-            f"<td data-sort=\"{VERDICTS.index(e['verdict'])}\">{_badge(e['verdict'])}</td>"
+            f"<td data-sort=\"{_rank(e['verdict'])}\">{_badge(e['verdict'])}</td>"
             f"<td>{_dbadge(e['D_verdict']) if e.get('D_verdict') else '–'}</td>"
             f"<td data-sort=\"{order[val['result']]}\">{_vbadge(e)}</td></tr>")
     todo = _attention(units)
@@ -595,3 +607,95 @@ def fleet_markdown(doc: dict) -> str:
                      f"{_ci(e)} | {_f(e['H_reference_s'])} | {_f(e['H_error_percent'], '+.1f')} | "
                      f"{e['verdict']} | {e['validation']['result']} | {MODEL_NAMES[e['validation']['model']]} |")
     return "\n".join(lines) + "\n"
+
+
+# --- inverter-based plants ----------------------------------------------------------------------
+
+def ibr_figure(e: dict, tr: dict, path: Path) -> list[str]:
+    """An inverter-based plant's P/f and Q/V panels (MOD-026-2's two checks): P measured and
+    played back with the recorded frequency deviation on the right axis; Q measured and played
+    back with the recorded |V| on the right axis; each with its residual below. Returns the
+    axes' labels (y of each axis, then x)."""
+    plt = _plt()
+    t = tr["time_s"]
+    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 1, 3, 1]})
+    f_dev_hz = np.asarray(tr["x2"][0]) / (2 * np.pi)
+    panels = (("P_t", "active power P [pu of MBASE]", f_dev_hz, "recorded frequency deviation [Hz]"),
+              ("Q_t", "reactive power Q [pu of MBASE]", np.asarray(tr["V_t"][0]), "recorded terminal |V| [pu]"))
+    for j, (k, ylabel, other, other_label) in enumerate(panels):
+        ax, rax = axes[2 * j], axes[2 * j + 1]
+        meas, sim = (np.asarray(x) for x in tr[k])
+        ax.plot(t, sim, lw=1.8, color="tab:red", alpha=0.55, label="played back (own records)")
+        ax.plot(t, meas, lw=0.8, color="k", label="measured")
+        ax.set_ylabel(ylabel, fontsize=8)
+        right = ax.twinx()
+        right.plot(t, other, lw=0.8, color="tab:blue", ls="--", label=other_label.split(" [")[0])
+        right.set_ylabel(other_label, fontsize=8, color="tab:blue")
+        right.tick_params(labelsize=7, colors="tab:blue")
+        ax.legend(handles=[*ax.get_lines(), *right.get_lines()], fontsize=7, loc="upper right")
+        rax.plot(t, sim - meas, lw=0.8, color="tab:red")
+        rax.axhline(0.0, color="k", lw=0.5)
+        rax.set_ylabel("played − meas.\n[pu of MBASE]", fontsize=7)
+        for a in (ax, rax):
+            a.grid(alpha=0.3)
+            a.tick_params(labelsize=7)
+    axes[-1].set_xlabel("time [s]")
+    val = e["validation"]
+    fig.suptitle(f"{e['name']}: inverter-based plant, P against frequency and Q against voltage "
+                 f"(model validation: {val['result']})", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    labels = [a.get_ylabel() for a in fig.axes] + [axes[-1].get_xlabel()]
+    plt.close(fig)
+    return labels
+
+
+def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
+    """An inverter-based plant's page: no H or D (no rotor), the validation in MOD-026-2's
+    terms (P/f and Q/V panels, the window scores), the records played back and their notes."""
+    name = html.escape(e["name"])
+    val = e["validation"]
+    pw = val["windows"] or {"onset_s": None, "scores": []}
+    val_text = {"pass": "The played-back records follow the recorded response within the criteria.",
+                "fail": "The played-back records do not follow the recorded response:",
+                "not judged": "Not judged:"}[val["result"]]
+    val_reasons = "".join(f"<li>{html.escape(r)}</li>" for r in val["reasons"])
+    win_rows = "".join(
+        f"<tr><td>{sc['window']}</td><td>{sc['channel']}</td>"
+        f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td><td>{_f(sc['peak_deviation_simulated'], '.3g')}</td>"
+        f"<td>{_f(sc['rms_error'], '.3g')}</td></tr>" for sc in pw["scores"])
+    models = "".join(
+        f"<tr><td>{html.escape(m['id'])}</td><td>{m['mbase_mva']:g}</td>"
+        + "".join(f"<td>{html.escape(pm.get(k, '–'))}</td>" for k in ("converter", "electrical", "plant"))
+        + "</tr>" for m, pm in zip(e["units"], e.get("playback_models") or [{}] * len(e["units"])))
+    notes = "".join(f"<li>{html.escape(n)}</li>" for n in e.get("playback_notes", []))
+    fb = e.get("playback_fallback")
+    rms = e["playback_rms_percent_mbase"]
+    img = (f'<img src="{name}.png" alt="P with the frequency deviation and Q with |V|, measured and '
+           'played back, with residuals">') if figures else ""
+    body = f"""
+<p><a href="../report.html">← fleet</a></p>
+<h1>{name}: inverter-based plant · model validation {_vbadge(e)}</h1>
+<p>Bus {e['bus']} ({e['bus_kv']:g} kV), {e['s_mva']:.0f} MVA, {len(e['units'])} unit(s); PMU at the
+{'plant terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
+{repairs_box(e.get("repairs") or [])}
+<h2>Inertia H and damping D: {_badge(e['verdict'])}</h2>
+<p>{html.escape(e['reasons'].get('no_rotor', ''))}: the swing-equation estimator does not apply.</p>
+<h2>Model validation: {_vbadge(e)}</h2>
+<p>{val_text}</p>{f'<ul>{val_reasons}</ul>' if val_reasons else ''}
+<p class="small">What was validated: {html.escape(val['scope'])}.</p>
+{img}
+<p class="small">Whole-record RMS error of the playback: P {_f(rms['P_t'], '.3g')} %, Q {_f(rms['Q_t'], '.3g')} %
+of MBASE.{f' Not played back: {html.escape(fb)}' if fb else ''}</p>
+<h3>By window</h3>
+<p class="small">Event onset {_f(pw['onset_s'], '.2f')} s. Deviations and errors in % of MBASE.</p>
+<table><tr><th>window</th><th>signal</th><th>peak dev. measured</th><th>peak dev. played back</th>
+<th>RMS error</th></tr>{win_rows}</table>
+<h2>Records played back</h2>
+<table><tr><th>unit ID</th><th>MBASE [MVA]</th><th>converter</th><th>electrical controls</th>
+<th>plant controller</th></tr>{models}</table>
+{f'<p>Notes:</p><ul class="small">{notes}</ul>' if notes else ''}
+<h2>Provenance</h2><p class="small">jaxdse {html.escape(doc['jaxdse_version'])}; fleet file
+{html.escape(doc['config']['file'])} (sha256 {doc['config']['sha256']})</p>
+"""
+    return _page(f"{e['name']}: inverter-based plant, model validation {val['result']}", body)
