@@ -111,3 +111,14 @@ def test_ibr_plant_page_shows_p_f_and_q_v(ibr_run):
     assert "an inverter-based plant has no rotor" in page
     assert "reactive power against voltage" in page
     assert "B8_PV" in (tmp / "out" / "report.html").read_text()
+
+
+def test_validate_says_ibr_calibration_is_not_supported(tmp_path):
+    """``jaxdse validate`` on the plant: skipped in one line that says why (nothing compiled)."""
+    path = _case(tmp_path)
+    assert main(["validate", str(path), "--out", str(tmp_path / "val")]) == 0
+    (u,) = json.loads((tmp_path / "val" / "validate.json").read_text())["units"]
+    assert u["name"] == "B8_PV" and "\n" not in u["skipped"]
+    assert u["skipped"].startswith("an inverter-based plant: ranking and calibration of IBR records")
+    assert "not yet supported" in u["skipped"]
+    assert (tmp_path / "val" / "calibrated.dyr").exists()

@@ -20,10 +20,14 @@ import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
+from typing import NamedTuple
 
+import jax.numpy as jnp
 import numpy as np
 
 from .._core.assess import Assessment
+from .._core.mapping import map_to_terminal
+from .._core.signals import frequency_from_angle
 from .._core.verdict import D_MEANING, NOTES
 from .._dyr.inventory import UNIT_CATEGORIES, inventory
 from .._io.errors import InputError
@@ -80,20 +84,33 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     if not units:
         raise first_error
     settings = dataclasses.replace(fleet.settings, keep="trajectories")
-    # One padded length for the whole fleet (the longest recording's): one compilation.
-    size = bucket(max(int(np.shape(u[1].t_s)[0]) for u in units))
-    work = [Unit(p.name, rec, p.run.plant, t0) for p, rec, t0, _ in units]
-    progress.total = len(fleet.plants) + planned_calls(work, fleet.identify, size) + len(units)
-    assessed = assess_units(work, fleet.observer,
-                            settings, fleet.identify, fleet.verdict, size=size,
-                            progress=lambda line: progress.step(f"assessed {line}"))
+    # The swing-equation estimator runs on the synchronous plants only (an inverter-based plant
+    # has no rotor: its recording is only mapped to its terminal, ``ibr_terminal``).
+    machines = [u for u in units if not u[0].ibr]
+    assessed = []
+    progress.total = len(fleet.plants) + len(units)
+    if machines:
+        # One padded length for the whole fleet (the longest recording's): one compilation.
+        size = bucket(max(int(np.shape(u[1].t_s)[0]) for u in machines))
+        work = [Unit(p.name, rec, p.run.plant, t0) for p, rec, t0, _ in machines]
+        progress.total += planned_calls(work, fleet.identify, size)
+        assessed = assess_units(work, fleet.observer,
+                                settings, fleet.identify, fleet.verdict, size=size,
+                                progress=lambda line: progress.step(f"assessed {line}"))
+    fronts = {u[0].name: (a if not u[0].ibr else ibr_terminal(u[1], u[0].run.plant, settings))
+              for u, a in zip(machines + [u for u in units if u[0].ibr],
+                              [*assessed, *(None for u in units if u[0].ibr)])}
     # Each plant's entry (its window criteria) as soon as its playback is done, while the
     # playbacks of other plants run.
     index = {u[0].name: k for k, u in enumerate(units)}
     done = {}
-    for name, dyr in dyr_playbacks(fleet, [u[0] for u in units], assessed):
-        (p, _, _, quality), a = units[index[name]], assessed[index[name]]
-        done[name] = (fleet_traces(p, a, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
+    for name, dyr in dyr_playbacks(fleet, [u[0] for u in units], [fronts[u[0].name] for u in units]):
+        (p, _, _, quality), a = units[index[name]], fronts[name]
+        if p.ibr:
+            tr = ibr_traces(a, dyr)
+            done[name] = (tr, ibr_entry(p, a, tr, quality, fleet.criteria, dyr))
+        else:
+            done[name] = (_traces(a.estimate, a.replay, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
         progress.step(f"assessed {p.name}")
     entries, traces = [], {}
     for p, *_ in units:
@@ -108,8 +125,10 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
                   f"{val['result']}: {why}", file=stream)
     doc = fleet_document(fleet, entries, skipped, time.perf_counter() - t_start)
     out_dir.mkdir(parents=True, exist_ok=True)
-    if fleet.inertia is not None:
-        doc["inertia"] = _inertia(fleet, units, entries, out_dir, stream)
+    if fleet.inertia is not None:   # the synchronous plants' stored energy
+        keep = [k for k, u in enumerate(units) if not u[0].ibr]
+        doc["inertia"] = _inertia(fleet, [units[k] for k in keep], [entries[k] for k in keep],
+                                  out_dir, stream)
     write_report(out_dir, doc, traces, figures=fleet.figures)
     doc["wall_time_s"] = round(time.perf_counter() - t_start, 2)
     (out_dir / "fleet.json").write_text(json.dumps(doc, indent=2) + "\n")
@@ -121,7 +140,7 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
           + (f"; {a['dyr_records_orphaned']} orphaned .dyr record(s)" if a["dyr_records_orphaned"] else "")
           + " (fleet.json accounting)", file=stream)
     print(f"[jaxdse] {len(entries)} plant(s), {len(skipped)} skipped. H: {_counts(s['verdicts'])}; "
-          f"median |H error| {_fmt(s['median_abs_H_error_percent'])} %. Model validation: "
+          f"median |H error| {_fmt(s['median_abs_H_error_percent']) or '–'} %. Model validation: "
           f"{_counts(s['validation'])} ({_counts(s['validation_models'], MODEL_WORDS)}). Wrote "
           f"{out_dir}/report.html, fleet.json, fleet.csv in {doc['wall_time_s']:.1f} s", file=stream)
     return doc
@@ -164,7 +183,9 @@ def fleet(path, out_dir, stream=None) -> list[dict]:
 def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant],
                   assessed) -> Iterator[tuple[str, DyrOutcome | None]]:
     """(plant name, DyrOutcome) for every plant as its .dyr playback is done (first the plants
-    that play back the surrogate), when ``[playback] model = "dyr"``; else (name, None)."""
+    that play back the surrogate), when ``[playback] model = "dyr"``; else (name, None).
+    ``assessed``: each plant's :class:`Assessment`, or an inverter-based plant's
+    :class:`IbrTerminal`."""
     if fleet.playback.model != "dyr":
         yield from ((p.name, None) for p in plants)
         return
@@ -173,6 +194,9 @@ def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant],
         pm = plant_model(fleet.raw, fleet.dyr, p, fleet.playback)
         if pm.fallback:
             yield p.name, DyrOutcome(pm, None)
+            continue
+        if p.ibr:
+            jobs[p.name] = (pm, terminal_series(a.time_s, a.v_t_pu, a.theta_t_rad, a.p_t_pu, a.q_t_pu))
             continue
         tr = a.estimate.trajectories
         jobs[p.name] = (pm, terminal_series(a.estimate.time_s, tr.v_t_pu, tr.theta_t_rad, tr.p_t_pu,
@@ -193,7 +217,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
     ident_info = e.get("identification", {})
     half = ident_info.get("relative_ci_percent")
     smape = e["smape_percent"]
-    traces = fleet_traces(p, a, dyr)
+    traces = _traces(a.estimate, a.replay, dyr)
     m = p.run.plant.machine
     validation = validation_entry(traces, p, criteria, dyr)
     damping = damping_entry(e, p)
@@ -229,7 +253,7 @@ def fleet_entry(p: FleetPlant, a: Assessment, quality: dict, criteria: dict,
         "identification": ident_info, "online": e["online"], "t_ref_pu": e["t_ref_pu"],
         "n_samples": e["n_samples"], "duration_s": e["duration_s"], "data_quality": quality,
     }
-    return ibr_entry(entry, p) if p.ibr else entry
+    return entry
 
 
 IBR_SCOPE = ("MOD-026-2's two checks on the plant's own PSS/E records, the recorded voltage phasor "
@@ -239,25 +263,95 @@ IBR_CHANNELS = ("P_t", "Q_t")
 """An inverter-based plant's judged channels: it has no rotor speed."""
 
 
-def ibr_entry(entry: dict, p: FleetPlant) -> dict:
-    """An inverter-based plant's fleet.json entry: H and D ``not applicable`` (no rotor; the
-    swing-equation estimator's numbers for the nominal machine that carries its recording are
-    not reported), the plant's records in place of the machine's."""
-    why = {"no_rotor": NO_ROTOR}
-    entry.update({
+class IbrTerminal(NamedTuple):
+    """An inverter-based plant's recording at its terminal (host arrays; pu on the plant's MBASE)."""
+
+    time_s: np.ndarray
+    v_t_pu: np.ndarray
+    """|V| at the terminal."""
+    theta_t_rad: np.ndarray
+    """Terminal voltage angle in the nominal frame."""
+    i_t_pu: np.ndarray
+    p_t_pu: np.ndarray
+    """Active power out of the terminal."""
+    q_t_pu: np.ndarray
+    f_dev_hz: np.ndarray
+    """Frequency deviation of the terminal bus: the channel where it has a value, else the
+    voltage angle's slope (as for a machine)."""
+
+
+def ibr_terminal(rec, plant, settings) -> IbrTerminal:
+    """The recording ``rec`` (conditioned, pu on the plant's MBASE) mapped to the plant's
+    terminal as a machine's is (``map_to_terminal``: through the step-up transformer where the
+    PMU is on its HV side), without the estimator."""
+    t = np.asarray(rec.t_s)
+    theta_ref = np.unwrap(np.asarray(rec.v_ang_rad))
+    i = np.asarray(rec.i_mag_pu) * np.exp(1j * (np.asarray(rec.i_ang_rad) - theta_ref))
+    mapped = map_to_terminal(jnp.asarray(np.asarray(rec.v_mag_pu) + 0j), jnp.asarray(i), plant.line,
+                             plant.transformer, plant.aux, rec.location)
+    v_t = np.asarray(mapped.v_t)
+    i_t = np.asarray(mapped.i_sg) * float(plant.current_scale)
+    s_t = v_t * np.conj(i_t)
+    f0 = float(plant.machine.f_nominal_hz)
+    f_hz = np.asarray(frequency_from_angle(jnp.asarray(theta_ref), t[1] - t[0], f0,
+                                           settings.derivative_half_width))
+    if rec.f_hz is not None:
+        f_rec = np.asarray(rec.f_hz)
+        f_hz = np.where(np.isnan(f_rec), f_hz, f_rec)
+    return IbrTerminal(t - t[0], np.abs(v_t), theta_ref + np.unwrap(np.angle(v_t)), np.abs(i_t),
+                       s_t.real, s_t.imag, f_hz - f0)
+
+
+def ibr_traces(front: IbrTerminal, dyr: DyrOutcome | None) -> dict:
+    """An inverter-based plant's measured and played-back traces (the unit page's P/f and Q/V
+    panels): x2 is the recorded frequency deviation [rad/s] (nothing simulates it, as |V|,
+    "V_t": the recorded voltage is imposed)."""
+    nan = np.full_like(front.time_s, np.nan)
+    pb = None if dyr is None else dyr.playback
+    sim = {"P_t": nan, "Q_t": nan, "I_t": nan} if pb is None else {
+        "P_t": np.asarray(pb.p_pu), "Q_t": np.asarray(pb.q_pu),
+        "I_t": np.hypot(pb.p_pu, pb.q_pu) / np.where(front.v_t_pu > 0, front.v_t_pu, 1.0)}
+    return {"time_s": front.time_s, "x2": (2 * np.pi * front.f_dev_hz, nan),
+            "I_t": (front.i_t_pu, sim["I_t"]), "P_t": (front.p_t_pu, sim["P_t"]),
+            "Q_t": (front.q_t_pu, sim["Q_t"]), "V_t": (front.v_t_pu, nan)}
+
+
+def ibr_entry(p: FleetPlant, front: IbrTerminal, traces: dict, quality: dict, criteria: dict,
+              dyr: DyrOutcome | None) -> dict:
+    """An inverter-based plant's fleet.json entry: H and D ``not applicable`` (no rotor: the
+    swing-equation estimator is not run on it), its own records' playback judged in MOD-026-2's
+    terms (:func:`validation_entry`), the records played back in place of a machine's."""
+    m = p.run.plant.machine
+    validation = validation_entry(traces, p, criteria, dyr)
+    out = {
+        "name": p.name, "bus": p.bus, "bus_kv": float(m.v_rated_kv), "s_mva": float(m.s_rated_mva),
         "plant_type": "inverter-based",
+        "estimator": NO_ROTOR + ": the swing-equation estimator (H, D) is not run on it",
         "H_s": None, "H_ci95": [None, None], "H_reference_s": None, "H_error_percent": None,
-        "D": None, "D_ci95": None, "D_verdict": "not applicable", "verdict": "not applicable",
-        "reasons": why,
+        "D": None, "D_ci95": None, "D_verdict": "not applicable",
         "damping": {"verdict": "not applicable", "reasons": [NO_ROTOR]},
-        "interval": {k: None for k in entry["interval"]},
-        "parameters": {}, "identification": {}, "online": {"H_s": None, "D": None},
-        "t_ref_pu": None, "machine": None, "governor_models": [],
-        "units": [{**u, "h_s": None} for u in entry["units"]],
-        "estimator": NO_ROTOR + ": the swing-equation estimator (H, D) is not applied",
-    })
-    entry.pop("surrogate_playback_rms_percent_mbase", None)   # a machine's surrogate: not applicable
-    return entry
+        "verdict": "not applicable", "reasons": {"no_rotor": NO_ROTOR},
+        "interval": {"relative_ci_percent": None, "noise_percent": None, "filter_spread_percent": None,
+                     "filter_refits_counted": None, "condition": None},
+        "validation": validation,
+        "playback_smape_percent": {"I_t": None, "P_t": None},
+        "playback_rms_percent_mbase": _rms_percent(traces, p),
+        "playback_model": validation["model"],
+        **({} if dyr is None else dyr.entry({})),
+        "parameters": {},
+        "units": [{**dataclasses.asdict(u), "h_s": None} for u in p.members],
+        "governor_models": [], "other_units_on_bus": list(p.others), "fallbacks": list(p.fallbacks),
+        "data_warnings": [*p.data_warnings, *p.run.notes], "repairs": list(p.repairs),
+        "machine": None,
+        "columns": dict(p.run.measurement.columns),
+        "current_direction": p.run.measurement.current_direction,
+        "location": p.run.measurement.location,
+        "identification": {}, "online": {"H_s": None, "D": None}, "t_ref_pu": None,
+        "n_samples": int(front.time_s.size), "duration_s": float(front.time_s[-1] - front.time_s[0]),
+        "data_quality": quality,
+    }
+    out.pop("surrogate_playback_rms_percent_mbase", None)   # a machine's surrogate: not applicable
+    return out
 
 
 def damping_entry(e: dict, p: FleetPlant) -> dict:
@@ -373,16 +467,6 @@ def _rms_percent(traces: dict, p: FleetPlant) -> dict:
         e = e[np.isfinite(e)]
         out[k] = float(scale[k] * np.sqrt(np.mean(e**2))) if e.size else None
     return out
-
-
-def fleet_traces(p: FleetPlant, a: Assessment, dyr: DyrOutcome | None) -> dict:
-    """The unit page's traces (:func:`_traces`); for an inverter-based plant also the recorded
-    |V| ("V_t": its Q/V panel; nothing simulates it, the recorded voltage is imposed)."""
-    traces = _traces(a.estimate, a.replay, dyr)
-    if p.ibr:
-        v = np.asarray(a.estimate.trajectories.v_t_pu)
-        traces["V_t"] = (v, np.full_like(v, np.nan))
-    return traces
 
 
 def _pct(x):

@@ -621,7 +621,8 @@ def ibr_figure(e: dict, tr: dict, path: Path) -> list[str]:
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(9, 8), gridspec_kw={"height_ratios": [3, 1, 3, 1]})
     f_dev_hz = np.asarray(tr["x2"][0]) / (2 * np.pi)
     panels = (("P_t", "active power P [pu of MBASE]", f_dev_hz, "recorded frequency deviation [Hz]"),
-              ("Q_t", "reactive power Q [pu of MBASE]", np.asarray(tr["V_t"][0]), "recorded terminal |V| [pu]"))
+              ("Q_t", "reactive power Q [pu of MBASE]", np.asarray(tr["V_t"][0]),
+               "recorded terminal |V| [pu]"))
     for j, (k, ylabel, other, other_label) in enumerate(panels):
         ax, rax = axes[2 * j], axes[2 * j + 1]
         meas, sim = (np.asarray(x) for x in tr[k])
@@ -662,7 +663,8 @@ def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
     val_reasons = "".join(f"<li>{html.escape(r)}</li>" for r in val["reasons"])
     win_rows = "".join(
         f"<tr><td>{sc['window']}</td><td>{sc['channel']}</td>"
-        f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td><td>{_f(sc['peak_deviation_simulated'], '.3g')}</td>"
+        f"<td>{_f(sc['peak_deviation_measured'], '.3g')}</td>"
+        f"<td>{_f(sc['peak_deviation_simulated'], '.3g')}</td>"
         f"<td>{_f(sc['rms_error'], '.3g')}</td></tr>" for sc in pw["scores"])
     models = "".join(
         f"<tr><td>{html.escape(m['id'])}</td><td>{m['mbase_mva']:g}</td>"
@@ -685,8 +687,8 @@ def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
 <p>{val_text}</p>{f'<ul>{val_reasons}</ul>' if val_reasons else ''}
 <p class="small">What was validated: {html.escape(val['scope'])}.</p>
 {img}
-<p class="small">Whole-record RMS error of the playback: P {_f(rms['P_t'], '.3g')} %, Q {_f(rms['Q_t'], '.3g')} %
-of MBASE.{f' Not played back: {html.escape(fb)}' if fb else ''}</p>
+<p class="small">Whole-record RMS error of the playback: P {_f(rms['P_t'], '.3g')} %,
+Q {_f(rms['Q_t'], '.3g')} % of MBASE.{f' Not played back: {html.escape(fb)}' if fb else ''}</p>
 <h3>By window</h3>
 <p class="small">Event onset {_f(pw['onset_s'], '.2f')} s. Deviations and errors in % of MBASE.</p>
 <table><tr><th>window</th><th>signal</th><th>peak dev. measured</th><th>peak dev. played back</th>
