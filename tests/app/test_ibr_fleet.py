@@ -32,18 +32,19 @@ def _recording(src: Path, dst: Path) -> str:
     return dst.name
 
 
-def _case(tmp: Path, event: str = "linetrip") -> Path:
+def _case(tmp: Path, event: str = "linetrip", playback: str = "dyr", electrical: str = "REECA1") -> Path:
     """The IEEE 14 case of the ANDES bench with bus 8's machine records replaced by the PV
     plant's (its .raw generator: 35 MW, 7.4 Mvar, MBASE 100 MVA, as ANDES's power flow)."""
     (tmp / "case.raw").write_text((CASE / "ieee14.raw").read_text())
     records = [r for r in (CASE / "ieee14.dyr").read_text().split("/") if not r.strip().startswith("8 ")]
-    (tmp / "case.dyr").write_text("/".join(records).rstrip() + "\n" + (BENCH / "plant.dyr").read_text())
+    plant = (BENCH / "plant.dyr").read_text().replace("'REECA1'", f"'{electrical}'")
+    (tmp / "case.dyr").write_text("/".join(records).rstrip() + "\n" + plant)
     name = _recording(BENCH / f"{event}.csv", tmp / f"{event}.csv")
     (tmp / "fleet.toml").write_text(
         f"[case]\nraw = \"case.raw\"\ndyr = \"case.dyr\"\n\n[measurement]\nfile = \"{name}\"\n"
         "location = \"terminal\"\nvoltage_unit = \"pu\"\ncurrent_unit = \"pu\"\nangle_unit = \"deg\"\n"
         "s_base_mva = 100.0\nmin_segment_s = 5.0\n\n[[unit]]\nname = \"B8_PV\"\nbus = 8\n"
-        f"columns = {{{COLS}}}\n\n[identify]\nenabled = false\n\n[playback]\nmodel = \"dyr\"\n")
+        f"columns = {{{COLS}}}\n\n[identify]\nenabled = false\n\n[playback]\nmodel = \"{playback}\"\n")
     return tmp / "fleet.toml"
 
 
@@ -122,3 +123,21 @@ def test_validate_says_ibr_calibration_is_not_supported(tmp_path):
     assert u["skipped"].startswith("an inverter-based plant: ranking and calibration of IBR records")
     assert "not yet supported" in u["skipped"]
     assert (tmp_path / "val" / "calibrated.dyr").exists()
+
+
+@pytest.mark.parametrize("playback, electrical, why", [
+    ("surrogate", "REECA1", "validated with its own records only"),
+    ("dyr", "REECB1", "not played back: REECB1 on bus 8 id '1'"),
+])
+def test_ibr_plant_not_played_back_is_not_judged(tmp_path, playback, electrical, why):
+    """The surrogate asked for (a machine's: it does not apply), or a record jaxdse does not
+    simulate: the plant is listed, not judged, the reason said; still no H (nothing compiled)."""
+    assert main(["fleet", str(_case(tmp_path, playback=playback, electrical=electrical)),
+                 "--out", str(tmp_path / "out")]) == 0
+    (u,) = json.loads((tmp_path / "out" / "fleet.json").read_text())["units"]
+    assert u["verdict"] == "not applicable" and u["H_s"] is None
+    val = u["validation"]
+    assert val["result"] == "not judged" and val["windows"] is None
+    assert len(val["reasons"]) == 1 and why in val["reasons"][0], val["reasons"]
+    assert u["playback_rms_percent_mbase"] == {"P_t": None, "Q_t": None}
+    assert (tmp_path / "out" / "units" / "B8_PV.html").exists()

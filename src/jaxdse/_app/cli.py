@@ -171,7 +171,10 @@ write a model-validation report a planner can file. Plant data come from the cas
 in-service units with a machine record on a bus form one plant on their summed MBASE; its
 reference H is the MBASE-weighted H of those records; its governor is the MBASE-weighted sum
 of the units' own governor records (units without one hold their torque). Models the .dyr has
-beyond these are listed, not fatal.
+beyond these are listed, not fatal. A bus whose units have inverter-based records (REGCA1 +
+REECA1, optionally REPCA1) and no machine record is an inverter-based plant: no rotor, so no H
+or D ("not applicable"); with model = "dyr" its records are played back and P against
+frequency, Q against voltage judged by the same windows (MOD-026-2).
 
 {FLEET_MODELS}
 
@@ -234,7 +237,8 @@ DIR gets:
   DIR/fleet.csv, DIR/report.md   the table
 
 Exit status: 0 on success; 2 on bad input (missing .raw/.dyr or recording, unknown key, no
-plant found) with a one-line message; 3 with --strict when any unit is not identified.
+plant found) with a one-line message; 3 with --strict when any unit is not identified (an
+inverter-based plant, which has no H, is not counted).
 
 example:
   jaxdse fleet experiments/naspi_osl_case1/fleet.toml --out osl_fleet/   # needs ../shared/data
@@ -519,8 +523,9 @@ def _in_range(command: str, option: str, value, low, high, what: str, low_open: 
 
 
 def _strict(args, units: list[dict]) -> int:
-    """Exit status 3 under --strict when any unit's verdict is not "identified", else 0."""
-    shaky = [e["name"] for e in units if e["verdict"] != "identified"]
+    """Exit status 3 under --strict when any unit's verdict is not "identified" (an
+    inverter-based plant's "not applicable": it has no H), else 0."""
+    shaky = [e["name"] for e in units if e["verdict"] not in ("identified", "not applicable")]
     if args.strict and shaky:
         print(f"jaxdse: --strict: {len(shaky)} unit(s) not identified: {', '.join(shaky)}", file=sys.stderr)
         return 3
