@@ -141,3 +141,22 @@ def test_ibr_plant_not_played_back_is_not_judged(tmp_path, playback, electrical,
     assert len(val["reasons"]) == 1 and why in val["reasons"][0], val["reasons"]
     assert u["playback_rms_percent_mbase"] == {"P_t": None, "Q_t": None}
     assert (tmp_path / "out" / "units" / "B8_PV.html").exists()
+
+
+def test_ibr_validation_fails_a_planted_kqv(ibr_run, tmp_path):
+    """The fault (0.1 s at |V| 0.38 pu, through REECA1's dip logic) with Kqv planted at 0.5
+    instead of 2: the reactive current injected in the dip is a quarter of ANDES's, and the
+    validation fails on Q, not on P (the same compiled program as ``ibr_run``). Measured with
+    the same criteria: Kqv x0.7 and x1.3 pass (Q RMS 1.8 and 0.9 % of MBASE over the record,
+    below the 2 % limit in every window; a 0.1 s dip is short against the 10 s event window)."""
+    path = _case(tmp_path, "fault")
+    text = (tmp_path / "case.dyr").read_text()
+    assert text.count(" -0.02 0.02 2 1.05") == 1                 # REECA1: dbd1 dbd2 Kqv Iqh1
+    (tmp_path / "case.dyr").write_text(text.replace(" -0.02 0.02 2 1.05", " -0.02 0.02 0.5 1.05"))
+    assert main(["fleet", str(path), "--out", str(tmp_path / "out")]) == 0
+    (u,) = json.loads((tmp_path / "out" / "fleet.json").read_text())["units"]
+    val = u["validation"]
+    assert val["result"] == "fail" and val["reasons"]
+    assert all(r.startswith("Q_t: ") for r in val["reasons"]), val["reasons"]
+    assert u["playback_rms_percent_mbase"]["Q_t"] > 2.0
+    assert u["playback_rms_percent_mbase"]["P_t"] < 1.0
