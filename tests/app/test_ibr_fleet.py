@@ -160,3 +160,33 @@ def test_ibr_validation_fails_a_planted_kqv(ibr_run, tmp_path):
     assert all(r.startswith("Q_t: ") for r in val["reasons"]), val["reasons"]
     assert u["playback_rms_percent_mbase"]["Q_t"] > 2.0
     assert u["playback_rms_percent_mbase"]["P_t"] < 1.0
+
+
+def test_ibr_plant_recorded_on_the_hv_side(ibr_run, tmp_path):
+    """The line trip as a PMU on the HV side of bus 8's step-up transformer (bus 7 of the .raw,
+    |V| 1.0225 pu) would record it (``transformer_to_hv``, the inverse of the fleet's mapping):
+    ``location = "hv"`` maps it back to the terminal and the playback is the terminal one's."""
+    import jax.numpy as jnp
+
+    from jaxdse._core.mapping import Transformer, transformer_to_hv
+    from jaxdse._io.psse import read_raw, transformer_kwargs
+
+    path = _case(tmp_path)
+    raw = read_raw(tmp_path / "case.raw", strict=False)
+    gsu = Transformer(**transformer_kwargs(raw.step_up_transformer(8), raw))
+    d = pd.read_csv(tmp_path / "linetrip.csv")
+    v = d["B8/VM"].to_numpy() * np.exp(1j * np.radians(d["B8/VA"].to_numpy()))
+    i = d["B8/IM"].to_numpy() * np.exp(1j * np.radians(d["B8/IA"].to_numpy()))
+    v_hv, i_hv = (np.asarray(x) for x in transformer_to_hv(jnp.asarray(v), jnp.asarray(i), gsu))
+    assert abs(abs(v_hv[0]) - 1.0225) < 1e-3
+    d["B8/VM"], d["B8/VA"] = np.abs(v_hv), np.degrees(np.angle(v_hv))
+    d["B8/IM"], d["B8/IA"] = np.abs(i_hv), np.degrees(np.angle(i_hv))
+    d.to_csv(tmp_path / "linetrip.csv", index=False)
+    path.write_text(path.read_text().replace('location = "terminal"', 'location = "hv"'))
+    assert main(["fleet", str(path), "--out", str(tmp_path / "out")]) == 0
+    (u,) = json.loads((tmp_path / "out" / "fleet.json").read_text())["units"]
+    (ref,) = ibr_run[1]["units"]
+    assert u["location"] == "hv" and u["validation"]["result"] == "pass"
+    for k in ("P_t", "Q_t"):
+        assert u["playback_rms_percent_mbase"][k] == pytest.approx(ref["playback_rms_percent_mbase"][k],
+                                                                   rel=1e-6, abs=1e-9)
