@@ -265,3 +265,20 @@ def test_criteria_are_plain_fields_a_toml_table_can_fill():
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.pre_s = 1.0
 
+
+
+def test_a_channel_left_out_of_judged_is_scored_not_judged():
+    """The .dyr playback is judged on P and Q (``fleet.DYR_JUDGED``): a speed channel that the
+    replay does not follow (here five times the measured swing) is scored and reported, and fails
+    the playback only where it is judged."""
+    meas, replay = measured(), response(0.10)
+    meas["x2"], replay["x2"] = 0.5 * (meas["P_t"] - 0.8), 2.5 * (replay["P_t"] - 0.8)
+    judged = window_scores(T, meas, replay, MBASE)
+    assert not judged.passed and all(r.startswith("x2:") for r in judged.reasons)
+    reported = window_scores(T, meas, replay, MBASE, judged=("P_t", "Q_t"))
+    assert reported.passed, reported.reasons
+    ev = reported.score("event", "x2")
+    assert ev.peak_deviation_simulated == pytest.approx(5 * ev.peak_deviation_measured, rel=0.1)
+    # P still judged: a replay off in P fails with x2 left out
+    off = {**replay, "P_t": response(0.10, scale=5.0)["P_t"]}
+    assert not window_scores(T, meas, off, MBASE, judged=("P_t", "Q_t")).passed

@@ -24,7 +24,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -437,7 +437,7 @@ def _rms_limit(channel: str, c: WindowCriteria) -> float:
 
 def window_scores(t, measured: Mapping[str, Sequence[float]], simulated: Mapping[str, Sequence[float]],
                   mbase_scale: Mapping[str, float], criteria: WindowCriteria = WindowCriteria(),
-                  onset: float | None = None) -> WindowScores:
+                  onset: float | None = None, judged: Collection[str] | None = None) -> WindowScores:
     """Judge a playback window by window (pre-event, event, post-event) and channel.
 
     t: time [s], uniform. measured, simulated: channel name -> samples in per unit (e.g.
@@ -445,6 +445,7 @@ def window_scores(t, measured: Mapping[str, Sequence[float]], simulated: Mapping
     mbase_scale: channel -> factor from the channel's unit to % of MBASE (100 for pu on the
     machine base; 100 x S_base / MBASE for pu on a system base S_base; missing: 100).
     onset: event onset [s]; None: ``event_start`` on the measured channels.
+    judged: the channels whose tests count (None: all); the others are scored and reported only.
 
     Per window and channel (``ChannelScore``): peak deviation from the pre-event value
     (median of the pre-event window, each signal its own), RMS error, time-aligned RMS error
@@ -513,7 +514,8 @@ def window_scores(t, measured: Mapping[str, Sequence[float]], simulated: Mapping
                               float(np.max(np.abs(s_avg[sl] - s0))), _rms(ss - ms), aligned, shift * dt,
                               _oscillation(ts, ms), _oscillation(ts, ss), mode_m, mode_s)
             scores.append(sc)
-            reasons += _judge(sc, c, _rms_limit(k, c), tol)
+            if judged is None or k in judged:
+                reasons += _judge(sc, c, _rms_limit(k, c), tol)
     return WindowScores(float(onset), win, tuple(scores), not reasons, tuple(reasons))
 
 
