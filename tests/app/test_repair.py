@@ -84,10 +84,12 @@ def test_the_change_table(repaired):
     assert (base["unit"], base["record"], base["file"], base["line"], base["con"], base["con_number"]) == \
         ("8_1", "generator", "case.raw", 38, "MBASE", 9)
     s0 = (35**2 + 7.39639154**2) ** 0.5
-    assert (base["old"], base["new"], base["bound"]) == (20.0, 37.57, 20.0) and base["value"] == pytest.approx(s0)
+    assert (base["old"], base["new"], base["bound"]) == (20.0, 37.57, 20.0)
+    assert base["value"] == pytest.approx(s0)
     assert base["new"] >= s0 * (1 + MARGIN) > base["new"] - 0.01
     assert base["why"].startswith("|S0| = |PG + jQG| = 35.77 above MBASE = 20 (PG = 35 MW, QG = 7.396 Mvar: "
-                                  "1.79 x MBASE, flagged above 1.1 x); MBASE at least 37.56 puts it 5 % inside; "
+                                  "1.79 x MBASE, flagged above 1.1 x); MBASE at least 37.56 puts it 5 % "
+                                  "inside; "
                                   "its PT = 50 MW is 2.5 x MBASE; the case's other in-service generators "
                                   "have MBASE = 2 x PT (median)")
     (e8,) = [e for e in doc["units"] if e["name"] == "8_1"]
@@ -133,7 +135,8 @@ def test_repaired_raw_changes_one_field_and_reads_back(repaired):
     assert len(new) == len(old)
     ((a, b),) = [(a, b) for a, b in zip(old, new) if a != b]
     assert a.startswith(GEN8.replace(", 100,", ", 20,"))
-    assert b.startswith(GEN8.replace(", 100,", ", 37.57,")) and b.split(" / ")[0] == a.replace(", 20,", ", 37.57,", 1)
+    assert b.startswith(GEN8.replace(", 100,", ", 37.57,"))
+    assert b.split(" / ")[0] == a.replace(", 20,", ", 37.57,", 1)
     raw = jd.read_raw(repaired / "out" / "repaired.raw")       # strict: a valid .raw
     g = raw.generator(8, "1")
     assert g.mbase_mva == 37.57 and g.pg_mw == 35.0 and g.pt_mw == 50.0
@@ -152,7 +155,8 @@ def test_the_repaired_case_passes_and_lists_its_change(repaired):
     (c,) = units["6_1"]["repairs"]
     assert (c["record"], c["con"], c["old"], c["new"], c["holds_new"]) == ("TGOV1", "VMAX", 0.25, 0.315, True)
     (c,) = units["8_1"]["repairs"]
-    assert (c["record"], c["con"], c["old"], c["new"], c["holds_new"]) == ("generator", "MBASE", 20.0, 37.57, True)
+    assert (c["record"], c["con"], c["old"], c["new"], c["holds_new"]) == \
+        ("generator", "MBASE", 20.0, 37.57, True)
     assert all(not e["repairs"] for n, e in units.items() if n not in ("6_1", "8_1"))
     s = doc["summary"]
     assert (s["pass"], s["data problem"], s["not supported"], s["fail"]) == (3, 1, 1, 0)

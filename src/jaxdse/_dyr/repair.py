@@ -237,7 +237,8 @@ def _base_change(e: dict, lims: list[dict], raw: RawCase | None) -> RawFieldChan
     usual = (f"; the case's other in-service generators have MBASE = {float(np.median(others)):.3g} x PT "
              "(median)" if others else "")
     fix = lim["fix"]
-    why = (f"{lim['signal']} = {_g(lim['value'])} above {lim['con']} = {_g(lim['bound'])} ({lim['context']}); "
+    why = (f"{lim['signal']} = {_g(lim['value'])} above {lim['con']} = {_g(lim['bound'])} "
+           f"({lim['context']}); "
            f"MBASE at least {_g((target - float(fix['offset'])) / float(fix['scale']))} puts it "
            f"{100 * MARGIN:g} % inside{pt}{usual}; the records' per-unit values are kept, on the new base")
     names = layout("generator", raw.revision)

@@ -77,7 +77,8 @@ __all__ = [
     "generator_label", "governor_from_dyr", "governor_module", "load_unit", "machine_kwargs",
     "machine_problems",
     "machine_warnings",
-    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "raw_repair_comment", "read_raw", "record_label",
+    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "raw_repair_comment", "read_raw",
+    "record_label",
     "repair_comment",
     "transformer_kwargs", "transformer_sides", "transient_data",
 ]
