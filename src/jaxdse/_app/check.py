@@ -69,7 +69,7 @@ import json
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import NamedTuple
 
@@ -80,7 +80,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._dyr.inventory import GENERATOR_CATEGORIES, Inventory, inventory
-from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings
+from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings, rating_crossings
 from .._dyr.records import UnitModel, record_kind, unit_model
 from .._dyr.stiff import EXPLICIT_LIMIT, kvaerno5, modes, stiff_note, too_stiff
 from .._dyr.unit import DyrUnit, UnitInputs
@@ -494,6 +494,13 @@ def _judge(st: _Static, g: RawGenerator, raw: RawCase, held: dict, step: dict, s
     where = (f"PG = {g.pg_mw:g} MW, QG = {g.qg_mvar:g} Mvar on MBASE = {g.mbase_mva:g} MVA, "
              f"VT = {start.vt:.4g} pu")
     data, limits = [], []
+    for c in rating_crossings(g.pg_mw, g.qg_mvar, g.mbase_mva):
+        data.append(f"generator on bus {g.bus} id {g.id.strip()!r} ({Path(raw.source).name} line {g.line}): "
+                    f"{describe(c)}: the power flow lies outside the capability of MBASE, the rating its "
+                    "dynamic records are per unit of")
+        limits.append({"record": "generator", "file": Path(raw.source).name, "line": g.line,
+                       "signal": c.signal, "value": c.value, "con": c.con, "bound": c.bound,
+                       "side": c.side, "context": c.context, "fix": c.fix._asdict()})
     if unit.exciter is not None:
         for c in exciter_crossings(models["exciter"], unit.exciter, y_e, start):
             data.append(f"{record_label(recs['exciter'])}: {describe(c)}: the initial field voltage "
@@ -602,13 +609,18 @@ def _unit_name(g: RawGenerator) -> str:
 
 
 def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec = SPEC,
-               progress: Callable[[str], None] | bool = True, workers: int | None = None) -> dict:
+               progress: Callable[[str], None] | bool = True, workers: int | None = None,
+               only: Collection[str] | None = None) -> dict:
     """The check of every synchronous unit of ``case``: the check.json document (``units``,
-    ``summary``, the runs' definition, timings)."""
+    ``summary``, the runs' definition, timings); ``only``: just the units of these names
+    ("BUS_ID", as check.json names them; ``--repair`` checks again the units whose MBASE it
+    changed)."""
     t_start = time.perf_counter()
     raw, dyr = case.raw, case.dyr
     inv = inventory(raw, dyr)
     accounts = inv.units(out_of_service=out_of_service)
+    if only is not None:
+        accounts = [a for a in accounts if _unit_name(a.generator) in set(only)]
     gens = [a.generator for a in accounts]
     off = inv.summary()["out_of_service_with_machine_record"]
     if not any(a.has_machine or a.category == "machine model unknown" for a in accounts):
@@ -714,7 +726,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                   "step_s": 1.0 / (spec.frame_hz * case.playback.substeps),
                   "ke_zero": case.playback.ke_zero},
         "summary": {**_summary(entries, off if not out_of_service else 0, len(order) + len(stiff)),
-                    "accounting": accounting(inv, entries)},
+                    "accounting": accounting(inv, entries) if only is None else None},
         "units": entries,
         "not_checked": [a.as_dict() for a in inv.generators if id(a) not in checked],
         "dyr_records_not_used": [r.as_dict() for r in inv.records],
@@ -723,7 +735,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         "group_times_s": times,
     }
     _finite(doc)
-    attach_carried(doc, dyr)
+    attach_carried(doc, dyr, raw)
     return doc
 
 
@@ -980,14 +992,22 @@ def run_check(path, out: Path | None = None, *, out_of_service: bool = False, re
     case = load_case(path)
     doc = check_case(case, out_of_service=out_of_service)
     if repair:
-        doc["repair"] = write_repair(case, doc, Path(out) if out is not None else Path(path).parent)
+        def recheck(again: CaseFile, names) -> dict:
+            # the units of their model chains: the groups of the first run, so its compiled programs
+            chains = {_chain(e) for e in doc["units"] if e["name"] in set(names)}
+            return check_case(again, out_of_service=out_of_service,
+                              only=[e["name"] for e in doc["units"] if _chain(e) in chains])
+
+        doc["repair"] = write_repair(case, doc, Path(out) if out is not None else Path(path).parent,
+                                     recheck=recheck)
     print(console_table(doc))
     if out is not None:
         write_check(out, doc)
         print(f"wrote {Path(out) / 'check.json'} and {Path(out) / 'check.html'}")
     if repair:
         files = doc["repair"]["files"]
-        print(f"wrote {files['dyr']}, {files['csv']} and {files['case']}; check the repaired case: "
+        print(f"wrote {files['dyr']}, " + (f"{files['raw']}, " if "raw" in files else "")
+              + f"{files['csv']} and {files['case']}; check the repaired case: "
               f"jaxdse check {files['case']}")
     return doc
 
