@@ -77,6 +77,7 @@ from ._dyr.calibrate import measured_pq as measured_pq
 from ._dyr.calibrate import rank as rank
 from ._dyr.calibrate import stack_events as stack_events
 from ._dyr.calibrate import with_values as with_values
+from ._dyr.ibr_unit import IbrUnit as IbrUnit
 from ._dyr.playback import PlaybackResult as PlaybackResult
 from ._dyr.playback import PlaybackSettings as PlaybackSettings
 from ._dyr.playback import TerminalSeries as TerminalSeries
@@ -138,6 +139,12 @@ from ._models.governors import IEESGO as IEESGO
 from ._models.governors import TGOV1 as TGOV1
 from ._models.governors import WSIEG1 as WSIEG1
 from ._models.governors import WeightedGovernor as WeightedGovernor
+from ._models.ibr import IBR_FIELDS as IBR_FIELDS
+from ._models.ibr import IBR_MODELS as IBR_MODELS
+from ._models.ibr import REECA1 as REECA1
+from ._models.ibr import REGCA1 as REGCA1
+from ._models.ibr import REPCA1 as REPCA1
+from ._models.ibr import ibr_from_dyr as ibr_from_dyr
 from ._models.machines import GENCLS as GENCLS
 from ._models.machines import GENROE as GENROE
 from ._models.machines import GENROU as GENROU

@@ -1,0 +1,692 @@
+"""Inverter-based resources: the WECC second-generation renewable models REGCA1 (generator/
+converter), REECA1 (electrical controls) and REPCA1 (plant controller), as PSS/E names them.
+
+Conventions (every model):
+
+* per unit on the machine base (MBASE); time in seconds; the current is aligned with the
+  terminal voltage (REGCA1 has no PLL): active current Ip in phase with V, reactive current
+  Iq positive when the plant *injects* reactive power (capacitive), so P = |V| Ip and
+  Q = |V| Iq. The current out of the terminal in the network frame is (Ip - j Iq) V/|V|;
+* flags (PSS/E ICONs: PFFLAG, VFLAG, QFLAG, PFLAG, PQFLAG, Lvplsw, VCFlag, RefFlag, Fflag) are
+  static fields, constants are array leaves; a lag with T = 0 is a pass-through whose state is
+  kept with zero derivative (one state layout under vmap); ``jnp.where``, never Python
+  branching on values; non-windup limits block the derivative that would push further;
+* the voltage-dip freeze (REECA1: |V| < Vdip or |V| > Vup) sets the derivatives of the frozen
+  states to zero; it is a switch of the vector field, so a solver with adaptive steps locates
+  it to its tolerance;
+* ``initial_state`` gives the steady state that holds the power flow (P, Q at |V|) with no
+  limit active and outside the dip band, and the references that hold it.
+
+Sources: WECC REMTF, *WECC Second Generation Wind Turbine Models* (2014) and *Solar Photovoltaic
+Power Plant Modeling and Validation Guideline* (REGC_A, REEC_A, REPC_A block diagrams);
+Siemens PTI, *PSS(R)E Model Library* (REGCA1, REECA1, REPCA1 CON/ICON tables); the model
+equations as written out in the GridKit REECA notes (ORNL, BSD-3) and the Dynawo WECC parameter
+records (MPL-2.0), read for the block order only (no code taken). ANDES (GPL) is used only as
+an external reference simulator by ``experiments/andes_ibr``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import NamedTuple
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from .._base.blocks import blocked as _blocked
+from .._base.blocks import lag as _lag
+from .._base.blocks import lead_lag as _lead_lag
+from .._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from .base import record_message
+
+LVPL_OPEN_PU = 9999.0
+"""The LVPL characteristic above its breakpoint (no limit), as PSS/E documents it [pu]."""
+V_FLOOR_PU = 0.01
+"""Dividers by a filtered voltage use max(V, this) [pu] (as the WECC diagrams do)."""
+
+
+def deadband(x, lo, hi):
+    """The WECC deadband with offset: 0 within [lo, hi], x - hi above, x - lo below."""
+    return jnp.where(x > hi, x - hi, jnp.where(x < lo, x - lo, 0.0))
+
+
+# --- REGCA1 -----------------------------------------------------------------------------------
+
+class REGCA1(eqx.Module):
+    """PSS/E REGCA1 (WECC REGC_A), the generator/converter interface.
+
+    Block diagram (WECC REGC_A; PSS/E Model Library "REGCA1"):
+
+        Iq  = 1/(1 + s Tg) Iqcmd, rate dIq/dt within [Iqrmin, Iqrmax]
+        Ip  = 1/(1 + s Tg) Ipcmd, rate dIp/dt <= Rrpwr, upper limit LVPL(Vf) when Lvplsw = 1
+        Vf  = 1/(1 + s Tfltr) |V|                               (LVPL voltage filter)
+        LVPL(Vf) = 0 below Zerox, Lvpl1 (Vf - Zerox)/(Brkpt - Zerox) up to Brkpt, open above
+        Ip_inj = Ip G(|V|), G = clip((|V| - Lvpnt0)/(Lvpnt1 - Lvpnt0), 0, 1)   (LVACM)
+        Iq_inj = max(Iq - Khv (|V| - Volim), Iolim) while |V| > Volim, else Iq   (HVRCM)
+
+    States: [Ip, Iq, Vf]. When LVPL falls below the Ip state, the output is LVPL at once and the
+    state relaxes to it with Tg (the non-windup limit of a lag whose limit moves; PSS/E resets
+    the state). The rate limits act at all times. Accel (the network-solution acceleration of
+    PSS/E's Norton source) has no role with the voltage imposed and is kept for the record.
+    """
+
+    lvplsw: int = eqx.field(static=True, converter=int, default=1)
+    """Lvplsw (ICON): 1 the LVPL limit on Ip is active, 0 not."""
+    t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tg: converter time constant [s] (> 0)."""
+    rrpwr_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """Rrpwr: up ramp rate of the active current [pu/s] (> 0)."""
+    brkpt_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """Brkpt: LVPL breakpoint [pu voltage]."""
+    zerox_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.4)
+    """Zerox: LVPL zero crossing [pu voltage] (< Brkpt)."""
+    lvpl1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.22)
+    """Lvpl1: LVPL at the breakpoint [pu current]."""
+    volim_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.2)
+    """Volim: voltage above which the high-voltage reactive current management acts [pu]."""
+    lvpnt1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.8)
+    """Lvpnt1: LVACM upper voltage (full active current above) [pu]."""
+    lvpnt0_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.4)
+    """Lvpnt0: LVACM lower voltage (no active current below) [pu] (< Lvpnt1)."""
+    iolim_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-1.3)
+    """Iolim: floor of the reactive current under HVRCM [pu current] (<= 0)."""
+    t_fltr_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tfltr: voltage filter of the LVPL [s] (0: none)."""
+    khv: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
+    """Khv: HVRCM gain [pu current / pu voltage]."""
+    iqrmax_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
+    """Iqrmax: up rate of the reactive current [pu/s] (> 0)."""
+    iqrmin_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
+    """Iqrmin: down rate of the reactive current [pu/s] (< 0)."""
+    accel: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
+    """Accel: PSS/E network acceleration factor [-] (unused here)."""
+
+    n_states = 3
+
+    def __check_init__(self):
+        check_positive(self, "t_g_s", "rrpwr_pu_s", "iqrmax_pu_s")
+        check_nonnegative(self, "t_fltr_s", "khv")
+        if all_concrete(self.iqrmin_pu_s, self.zerox_pu, self.brkpt_pu, self.lvpnt0_pu,
+                        self.lvpnt1_pu, self.iolim_pu):
+            check_that(self, self.iqrmin_pu_s < 0, f"Iqrmin must be < 0, got {self.iqrmin_pu_s}")
+            check_that(self, self.iolim_pu <= 0, f"Iolim must be <= 0, got {self.iolim_pu}")
+            check_that(self, self.lvpnt1_pu > self.lvpnt0_pu,
+                       f"Lvpnt1 ({self.lvpnt1_pu}) must be > Lvpnt0 ({self.lvpnt0_pu})")
+            if self.lvplsw:
+                check_that(self, self.brkpt_pu > self.zerox_pu,
+                           f"Brkpt ({self.brkpt_pu}) must be > Zerox ({self.zerox_pu})")
+
+    def lvpl(self, vf):
+        """The LVPL ceiling on Ip at filtered voltage ``vf`` [pu] (open when Lvplsw = 0)."""
+        if not self.lvplsw:
+            return jnp.full_like(vf, LVPL_OPEN_PU)
+        span = jnp.where(self.brkpt_pu > self.zerox_pu, self.brkpt_pu - self.zerox_pu, 1.0)
+        ramp = self.lvpl1_pu * (vf - self.zerox_pu) / span
+        return jnp.where(vf < self.zerox_pu, 0.0, jnp.where(vf < self.brkpt_pu, ramp, LVPL_OPEN_PU))
+
+    def lvacm(self, vt):
+        """The low-voltage active current management gain G(|V|) [-]."""
+        return jnp.clip((vt - self.lvpnt0_pu) / (self.lvpnt1_pu - self.lvpnt0_pu), 0.0, 1.0)
+
+    def injection(self, state, vt):
+        """(Ip_inj, Iq_inj) [pu current]: the currents the converter injects at |V| = ``vt``."""
+        ip = jnp.minimum(state[0], self.lvpl(state[2]))
+        hv = self.khv * jnp.maximum(vt - self.volim_pu, 0.0)
+        iq = jnp.where(vt > self.volim_pu, jnp.maximum(state[1] - hv, self.iolim_pu), state[1])
+        return ip * self.lvacm(vt), iq
+
+    def vector_field(self, state, vt, ipcmd, iqcmd):
+        """d[Ip, Iq, Vf]/dt at |V| = ``vt`` [pu] with the commands Ipcmd, Iqcmd [pu]."""
+        ip, iq, vf = state[0], state[1], state[2]
+        ceiling = self.lvpl(vf)
+        d_ip = jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s)
+        d_ip = jnp.where(ip > ceiling, (ceiling - ip) / self.t_g_s, _blocked(ip, d_ip, -jnp.inf, ceiling))
+        d_iq = jnp.clip((iqcmd - iq) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
+        _, d_vf = _lag(vt, vf, self.t_fltr_s)
+        return jnp.stack([d_ip, d_iq, d_vf])
+
+    def initial_state(self, vt, p, q):
+        """(state, Ipcmd, Iqcmd): the steady state injecting P = ``p``, Q = ``q`` [pu] at |V| =
+        ``vt`` (HVRCM inactive: |V| <= Volim; the LVACM gain divides Ip)."""
+        ip = p / (vt * self.lvacm(vt))
+        iq = q / vt
+        return jnp.stack([ip, iq, jnp.asarray(vt, float) + 0.0 * ip]), ip, iq
+
+
+# --- REECA1 -----------------------------------------------------------------------------------
+
+class ElectricalInputs(NamedTuple):
+    """What the electrical controls see at one instant (machine base)."""
+
+    vt_pu: Array
+    """Terminal voltage magnitude [pu]."""
+    p_pu: Array
+    """Active power out of the terminal, Pe [pu]."""
+    q_pu: Array
+    """Reactive power out of the terminal, Qgen [pu]."""
+    p_ref_pu: Array
+    """Active power reference Pref [pu] (from the plant controller, or constant)."""
+    q_ext_pu: Array
+    """Reactive power reference Qext [pu] (from the plant controller, or constant)."""
+    speed_pu: Array
+    """Generator speed wg [pu] (PFLAG = 1 multiplies Pref by it; 1 for a plant without one)."""
+
+
+class ElectricalReferences(NamedTuple):
+    """The references of REECA1 that hold its initial steady state."""
+
+    v_ref0_pu: Array
+    """Vref0 [pu]: the record's, or |V| at the start where the record gives 0."""
+    v_ref1_pu: Array
+    """Vref1 [pu] (VFLAG = 0): the inner voltage loop's reference that holds the start."""
+    pfaref_rad: Array
+    """Power factor angle reference [rad] (PFFLAG = 1): atan(Q0/P0)."""
+
+
+class REECA1(eqx.Module):
+    """PSS/E REECA1 (WECC REEC_A), the electrical controls of a renewable plant.
+
+    Block diagram (WECC REEC_A; PSS/E Model Library "REECA1"), with Vt the terminal voltage:
+
+        Vm   = 1/(1 + s Trv) Vt;   dip = Vt < Vdip or Vt > Vup      (the freeze, unfiltered Vt)
+        Iqv  = clip(Kqv db(Vref0 - Vm, dbd1, dbd2), Iql1, Iqh1)       (added while dip only)
+        Qref = Pm tan(pfaref) if PFFLAG else Qext;  Pm = 1/(1 + s Tp) Pe;  Qc = clip(Qref, Qmin, Qmax)
+        Vq   = PI(Kqp, Kqi)[Qc - Qgen], limits [Vmin, Vmax], integrator frozen in a dip
+        Vsel = Vq if VFLAG else Qc + Vref1
+        Iqb  = PI(Kvp, Kvi)[Vsel - Vm], limits [-Iqmax, Iqmax], integrator frozen in a dip
+        Iqv0 = 1/(1 + s Tiq) Qc / max(Vm, 0.01), frozen in a dip
+        Iqcmd = clip((Iqb if QFLAG else Iqv0) + dip Iqv, -Iqmax, Iqmax)
+        Pord = 1/(1 + s Tpord) (Pref wg^PFLAG), rate [dPmin, dPmax], limits [Pmin, Pmax], frozen
+        Ipcmd = clip(Pord / max(Vm, 0.01), 0, Ipmax)
+        PQFLAG = 0 (Q priority): Iqmax = min(VDL1(Vm), Imax), Ipmax = min(VDL2(Vm), sqrt(Imax^2 - Iqcmd^2))
+        PQFLAG = 1 (P priority): Ipmax = min(VDL2(Vm), Imax), Iqmax = min(VDL1(Vm), sqrt(Imax^2 - Ipcmd^2))
+
+    States: [Vm, Pm, PI_Q integrator, PI_V integrator, Iqv0 lag, Pord]. VDL1/VDL2 are the
+    piecewise-linear tables (Vq1, Iq1) ... (Vq4, Iq4) and (Vp1, Ip1) ... (Vp4, Ip4), flat
+    outside. Simplifications, stated: the post-dip hold timers Thld and Thld2 (and Iqfrz, the
+    value held) are not modelled (the injection ends with the dip, Ipmax is not held); Vref1 is
+    set by ``initial_state`` so that the start is at rest (the record's Vref1 is ignored); the
+    voltage is the terminal's (the remote regulated bus ICON is recorded, not used).
+    """
+
+    pfflag: int = eqx.field(static=True, converter=int, default=0)
+    """PFFLAG: 1 constant power factor (Qref = Pe tan(pfaref)), 0 Q from Qext."""
+    vflag: int = eqx.field(static=True, converter=int, default=1)
+    """VFLAG: 1 Q control (the PI_Q output is the voltage loop's reference), 0 voltage control."""
+    qflag: int = eqx.field(static=True, converter=int, default=0)
+    """QFLAG: 1 voltage/Q control through the PI loops, 0 constant Q (Iq = Qref/V)."""
+    pflag: int = eqx.field(static=True, converter=int, default=0)
+    """PFLAG: 1 Pref multiplied by the generator speed, 0 not."""
+    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    """PQFLAG: current limit priority, 0 reactive, 1 active."""
+    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal."""
+    vdip_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """Vdip: voltage below which the dip logic acts [pu]."""
+    vup_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.1)
+    """Vup: voltage above which the dip logic acts [pu] (> Vdip)."""
+    t_rv_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Trv: terminal voltage filter [s] (0: none)."""
+    dbd1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.05)
+    """dbd1: lower edge of the voltage error deadband [pu] (<= 0)."""
+    dbd2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """dbd2: upper edge of the voltage error deadband [pu] (>= 0)."""
+    kqv: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """Kqv: reactive current injection gain in a dip [pu current / pu voltage]."""
+    iqh1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.05)
+    """Iqh1: upper limit of the injection [pu current]."""
+    iql1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-1.05)
+    """Iql1: lower limit of the injection [pu current]."""
+    v_ref0_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Vref0: reference of the injection's voltage error [pu] (0: the initial |V|)."""
+    iqfrz_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Iqfrz: injection held after a dip for Thld [pu current] (not modelled)."""
+    thld_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Thld: hold time of the injection after a dip [s] (not modelled: 0)."""
+    thld2_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Thld2: hold time of Ipmax after a dip [s] (not modelled: 0)."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Tp: electrical power filter [s] (0: none)."""
+    q_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.436)
+    """QMax: reactive power reference ceiling [pu]."""
+    q_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.436)
+    """QMin: reactive power reference floor [pu]."""
+    v_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.1)
+    """VMAX: upper limit of the PI_Q output [pu]."""
+    v_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """VMIN: lower limit of the PI_Q output [pu]."""
+    kqp: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kqp: PI_Q proportional gain [pu/pu]."""
+    kqi: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Kqi: PI_Q integral gain [pu/pu/s]."""
+    kvp: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kvp: PI_V proportional gain [pu/pu]."""
+    kvi: Float[Array, ""] = eqx.field(converter=as_float, default=40.0)
+    """Kvi: PI_V integral gain [pu/pu/s]."""
+    v_ref1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Vref1: the record's inner voltage reference [pu] (replaced by the initial one)."""
+    t_iq_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tiq: reactive current command lag (QFLAG = 0) [s] (0: none)."""
+    dp_max_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=99.0)
+    """dPmax: up rate of the power order [pu/s] (> 0)."""
+    dp_min_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-99.0)
+    """dPmin: down rate of the power order [pu/s] (< 0)."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """PMAX: power order ceiling [pu]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PMIN: power order floor [pu]."""
+    i_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.7)
+    """Imax: converter current limit [pu] (> 0)."""
+    t_pord_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tpord: power order lag [s] (0: none)."""
+    vdl1_v_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.2, 0.5, 1.0, 1.5))
+    """Vq1..Vq4: voltages of the VDL1 table [pu] (increasing)."""
+    vdl1_i_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(1.5, 1.5, 1.5, 1.5))
+    """Iq1..Iq4: reactive current ceilings of the VDL1 table [pu]."""
+    vdl2_v_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.2, 0.5, 1.0, 1.5))
+    """Vp1..Vp4: voltages of the VDL2 table [pu] (increasing)."""
+    vdl2_i_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(1.5, 1.5, 1.5, 1.5))
+    """Ip1..Ip4: active current ceilings of the VDL2 table [pu]."""
+
+    n_states = 6
+
+    def __check_init__(self):
+        for name in ("pfflag", "vflag", "qflag", "pflag", "pqflag"):
+            if getattr(self, name) not in (0, 1):
+                raise ValueError(f"REECA1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_positive(self, "dp_max_pu_s", "i_max_pu")
+        check_nonnegative(self, "t_rv_s", "t_p_s", "t_iq_s", "t_pord_s", "kqi", "kvi",
+                          "vdl1_i_pu", "vdl2_i_pu")
+        if all_concrete(self.vdip_pu, self.vup_pu, self.dbd1_pu, self.dbd2_pu, self.q_max_pu,
+                        self.v_max_pu, self.p_max_pu, self.dp_min_pu_s, self.vdl1_v_pu, self.vdl2_v_pu):
+            check_that(self, self.vup_pu > self.vdip_pu,
+                       f"Vup ({self.vup_pu}) must be > Vdip ({self.vdip_pu})")
+            check_that(self, (self.dbd1_pu <= 0) & (self.dbd2_pu >= 0),
+                       f"dbd1 ({self.dbd1_pu}) must be <= 0 <= dbd2 ({self.dbd2_pu})")
+            check_that(self, self.q_max_pu >= self.q_min_pu,
+                       f"QMax ({self.q_max_pu}) must be >= QMin ({self.q_min_pu})")
+            check_that(self, self.v_max_pu >= self.v_min_pu,
+                       f"VMAX ({self.v_max_pu}) must be >= VMIN ({self.v_min_pu})")
+            check_that(self, self.p_max_pu >= self.p_min_pu,
+                       f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
+            check_that(self, self.dp_min_pu_s < 0, f"dPmin must be < 0, got {self.dp_min_pu_s}")
+            for v, what in ((self.vdl1_v_pu, "Vq1..Vq4"), (self.vdl2_v_pu, "Vp1..Vp4")):
+                check_that(self, np.all(np.diff(np.asarray(v)) > 0),
+                           f"{what} must increase, got {np.asarray(v).tolist()}")
+
+    def _freeze(self, vt):
+        return (vt < self.vdip_pu) | (vt > self.vup_pu)
+
+    def commands(self, state, u: ElectricalInputs, refs: ElectricalReferences):
+        """(Ipcmd, Iqcmd, dip, internals): the current commands [pu] at ``state``; ``internals``
+        (the PI errors and outputs) serve the vector field."""
+        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
+        vm, _ = _lag(u.vt_pu, vm, self.t_rv_s)
+        pm, _ = _lag(u.p_pu, pm, self.t_p_s)
+        dip = self._freeze(u.vt_pu)
+        v_safe = jnp.maximum(vm, V_FLOOR_PU)
+        iqv = jnp.clip(self.kqv * deadband(refs.v_ref0_pu - vm, self.dbd1_pu, self.dbd2_pu),
+                       self.iql1_pu, self.iqh1_pu)
+        q_ref = pm * jnp.tan(refs.pfaref_rad) if self.pfflag else u.q_ext_pu
+        q_c = jnp.clip(q_ref, self.q_min_pu, self.q_max_pu)
+        e_q = q_c - u.q_pu
+        vq_raw = self.kqp * e_q + x_q
+        vq = jnp.clip(vq_raw, self.v_min_pu, self.v_max_pu)
+        v_sel = vq if self.vflag else q_c + refs.v_ref1_pu
+        e_v = v_sel - vm
+        iv0, _ = _lag(q_c / v_safe, x_iq, self.t_iq_s)
+        pord_out = jnp.clip(jnp.where(self.t_pord_s > 0, pord, self._p_in(u)), self.p_min_pu, self.p_max_pu)
+        ip_raw = pord_out / v_safe
+        vdl1 = jnp.interp(vm, self.vdl1_v_pu, self.vdl1_i_pu)
+        vdl2 = jnp.interp(vm, self.vdl2_v_pu, self.vdl2_i_pu)
+        if self.pqflag:
+            ip_max = jnp.minimum(vdl2, self.i_max_pu)
+            ipcmd = jnp.clip(ip_raw, 0.0, ip_max)
+            iq_max = jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd ** 2, 1e-12)))
+        else:
+            iq_max = jnp.minimum(vdl1, self.i_max_pu)
+        iqb_raw = self.kvp * e_v + x_v
+        iqb = jnp.clip(iqb_raw, -iq_max, iq_max)
+        iqcmd = jnp.clip((iqb if self.qflag else iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
+        if not self.pqflag:
+            ip_max = jnp.minimum(vdl2, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - iqcmd ** 2, 1e-12)))
+            ipcmd = jnp.clip(ip_raw, 0.0, ip_max)
+        return ipcmd, iqcmd, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max)
+
+    def _p_in(self, u: ElectricalInputs):
+        return u.p_ref_pu * u.speed_pu if self.pflag else u.p_ref_pu
+
+    def vector_field(self, state, u: ElectricalInputs, refs: ElectricalReferences):
+        """d(state)/dt."""
+        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
+        _, d_vm = _lag(u.vt_pu, vm, self.t_rv_s)
+        _, d_pm = _lag(u.p_pu, pm, self.t_p_s)
+        _, _, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max) = self.commands(state, u, refs)
+        run = 1.0 - dip.astype(state.dtype)
+        d_q = run * _blocked(vq_raw, self.kqi * e_q, self.v_min_pu, self.v_max_pu)
+        d_v = run * _blocked(iqb_raw, self.kvi * e_v, -iq_max, iq_max)
+        v_safe = jnp.maximum(jnp.where(self.t_rv_s > 0, vm, u.vt_pu), V_FLOOR_PU)
+        _, d_iq = _lag(q_c / v_safe, x_iq, self.t_iq_s)
+        on = self.t_pord_s > 0
+        d_p = jnp.clip((self._p_in(u) - pord) / jnp.where(on, self.t_pord_s, 1.0),
+                       self.dp_min_pu_s, self.dp_max_pu_s)
+        d_p = jnp.where(on, _blocked(pord, d_p, self.p_min_pu, self.p_max_pu), 0.0)
+        if not self.qflag:
+            d_q, d_v = d_q * 0.0, d_v * 0.0      # the PI loops are not in the signal path
+        return jnp.stack([d_vm, d_pm, d_q, d_v, run * d_iq, run * d_p])
+
+    def initial_state(self, vt, p, q, ipcmd, iqcmd):
+        """(state, ElectricalReferences, Pref, Qext): the steady state that issues the commands
+        ``ipcmd``, ``iqcmd`` [pu] at |V| = ``vt``, P = ``p``, Q = ``q``, and the references
+        (Pref, and Qext for PFFLAG = 0) that hold it. Assumes no limit active, no dip."""
+        vt = jnp.asarray(vt, float)
+        v_ref0 = jnp.where(self.v_ref0_pu == 0.0, vt, self.v_ref0_pu)
+        pfaref = jnp.arctan2(q, p) if self.pfflag else jnp.zeros_like(vt)
+        p_ref = ipcmd * vt                      # Pord = Ipcmd Vm: the order that gives Ipcmd
+        q_ext = q
+        q_c = jnp.clip(q, self.q_min_pu, self.q_max_pu)
+        v_ref1 = vt - q_c                       # VFLAG = 0: Vsel = Qc + Vref1 = Vm
+        x_q = vt + 0.0 * q                      # PI_Q output = Vm (e_q = 0)
+        x_v = iqcmd + 0.0 * vt                  # PI_V output = Iqcmd (e_v = 0)
+        x_iq = q_c / jnp.maximum(vt, V_FLOOR_PU)
+        pord = p_ref                            # speed 1 at the start (PFLAG = 1)
+        state = jnp.stack([vt, jnp.asarray(p, float) + 0.0 * vt, x_q, x_v, x_iq, pord])
+        return state, ElectricalReferences(v_ref0, v_ref1, pfaref), p_ref, q_ext
+
+
+# --- REPCA1 -----------------------------------------------------------------------------------
+
+class PlantInputs(NamedTuple):
+    """What the plant controller measures (machine base; the branch is the unit's terminal)."""
+
+    v_re_pu: Array
+    v_im_pu: Array
+    i_re_pu: Array
+    """Branch current, real part [pu] (out of the unit, network frame)."""
+    i_im_pu: Array
+    p_pu: Array
+    """Branch active power Pbranch [pu]."""
+    q_pu: Array
+    """Branch reactive power Qbranch [pu]."""
+    freq_dev_pu: Array
+    """Frequency deviation [pu]: Freq = 1 + this."""
+
+
+class PlantReferences(NamedTuple):
+    """The references of REPCA1 that hold its initial steady state."""
+
+    v_ref_pu: Array
+    """Vref [pu] (RefFlag = 1): the compensated voltage at the start."""
+    q_ref_pu: Array
+    """Qref [pu] (RefFlag = 0): Qbranch at the start."""
+    p_ref_pu: Array
+    """Plant_pref [pu]: Pbranch at the start."""
+
+
+class REPCA1(eqx.Module):
+    """PSS/E REPCA1 (WECC REPC_A), the plant controller.
+
+    Block diagram (WECC REPC_A; PSS/E Model Library "REPCA1"):
+
+        Vc  = |V - (Rc + j Xc) I| if VCFlag else |V| + Kc Qbranch;   Vf = 1/(1 + s Tfltr) Vc
+        Qf  = 1/(1 + s Tfltr) Qbranch
+        e   = clip(db(Vref - Vf if RefFlag else Qref - Qf, dbd1, dbd2), emin, emax)
+        Qpi = PI(Kp, Ki)[e], limits [Qmin, Qmax], integrator frozen while |V| < Vfrz
+        Qext = (1 + s Tft)/(1 + s Tfv) Qpi
+        Pf  = 1/(1 + s Tp) Pbranch;  ef = db(1 - Freq, fdbd1, fdbd2)
+        ep  = clip(Plant_pref - Pf + min(Ddn ef, 0) + max(Dup ef, 0), femin, femax)
+        Ppi = PI(Kpg, Kig)[ep], limits [Pmin, Pmax];  Pref = 1/(1 + s Tg) Ppi   (Fflag = 1)
+        Pref = Plant_pref                                                       (Fflag = 0)
+
+    States: [Vf, Qf, PI_Q integrator, lead-lag, Pf, PI_P integrator, Pref lag]. The regulated
+    bus and the monitored branch (ICONs) are taken at the unit's terminal: the branch flow is the
+    unit's own output (recorded in ``regulated_bus`` and ``branch``, not used).
+    """
+
+    vcflag: int = eqx.field(static=True, converter=int, default=1)
+    """VCFlag: 1 line drop compensation (Rc, Xc), 0 reactive droop (Kc)."""
+    refflag: int = eqx.field(static=True, converter=int, default=1)
+    """RefFlag: 1 voltage control, 0 reactive power control."""
+    fflag: int = eqx.field(static=True, converter=int, default=1)
+    """Fflag: 1 active power control with frequency droop, 0 Pref held."""
+    regulated_bus: int = eqx.field(static=True, converter=int, default=0)
+    """IREG ICON: the regulated bus (0: terminal); taken at the terminal."""
+    branch: tuple = eqx.field(static=True, default=(0, 0, "1"))
+    """(from bus, to bus, circuit) ICONs of the monitored branch; taken at the terminal."""
+    t_fltr_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tfltr: voltage and reactive power filter [s] (0: none)."""
+    kp: Float[Array, ""] = eqx.field(converter=as_float, default=18.0)
+    """Kp: PI_Q proportional gain [pu/pu]."""
+    ki: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
+    """Ki: PI_Q integral gain [pu/pu/s]."""
+    t_ft_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Tft: lead time constant [s]."""
+    t_fv_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.075)
+    """Tfv: lag time constant [s] (0: no lead-lag)."""
+    vfrz_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Vfrz: voltage below which the PI_Q integrator freezes [pu]."""
+    rc_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Rc: line drop compensation resistance [pu]."""
+    xc_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Xc: line drop compensation reactance [pu]."""
+    kc: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kc: reactive droop gain [pu/pu]."""
+    e_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """emax: upper limit of the error [pu]."""
+    e_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.1)
+    """emin: lower limit of the error [pu]."""
+    dbd1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """dbd1: lower edge of the error deadband [pu] (<= 0)."""
+    dbd2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """dbd2: upper edge of the error deadband [pu] (>= 0)."""
+    q_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.436)
+    """Qmax: PI_Q output ceiling [pu]."""
+    q_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.436)
+    """Qmin: PI_Q output floor [pu]."""
+    kpg: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Kpg: PI_P proportional gain [pu/pu]."""
+    kig: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Kig: PI_P integral gain [pu/pu/s]."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.25)
+    """Tp: active power filter [s] (0: none)."""
+    fdbd1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """fdbd1: lower edge of the frequency deadband [pu] (<= 0)."""
+    fdbd2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """fdbd2: upper edge of the frequency deadband [pu] (>= 0)."""
+    fe_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
+    """femax: upper limit of the power error [pu]."""
+    fe_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
+    """femin: lower limit of the power error [pu]."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
+    """Pmax: PI_P output ceiling [pu]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
+    """Pmin: PI_P output floor [pu]."""
+    t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Tg (Tlag): lag of the plant's Pref [s] (0: none)."""
+    ddn_pu: Float[Array, ""] = eqx.field(converter=as_float, default=20.0)
+    """Ddn: down-regulation droop (over-frequency) [pu power / pu frequency]."""
+    dup_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Dup: up-regulation droop (under-frequency) [pu power / pu frequency]."""
+
+    n_states = 7
+
+    def __check_init__(self):
+        for name in ("vcflag", "refflag", "fflag"):
+            if getattr(self, name) not in (0, 1):
+                raise ValueError(f"REPCA1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_nonnegative(self, "t_fltr_s", "t_ft_s", "t_fv_s", "ki", "kig", "t_p_s", "t_g_s",
+                          "ddn_pu", "dup_pu")
+        if all_concrete(self.e_max_pu, self.q_max_pu, self.p_max_pu, self.fe_max_pu,
+                        self.dbd1_pu, self.fdbd1_pu):
+            check_that(self, self.e_max_pu >= self.e_min_pu,
+                       f"emax ({self.e_max_pu}) must be >= emin ({self.e_min_pu})")
+            check_that(self, self.q_max_pu >= self.q_min_pu,
+                       f"Qmax ({self.q_max_pu}) must be >= Qmin ({self.q_min_pu})")
+            check_that(self, self.p_max_pu >= self.p_min_pu,
+                       f"Pmax ({self.p_max_pu}) must be >= Pmin ({self.p_min_pu})")
+            check_that(self, self.fe_max_pu >= self.fe_min_pu,
+                       f"femax ({self.fe_max_pu}) must be >= femin ({self.fe_min_pu})")
+            check_that(self, (self.dbd1_pu <= 0) & (self.dbd2_pu >= 0),
+                       f"dbd1 ({self.dbd1_pu}) must be <= 0 <= dbd2 ({self.dbd2_pu})")
+            check_that(self, (self.fdbd1_pu <= 0) & (self.fdbd2_pu >= 0),
+                       f"fdbd1 ({self.fdbd1_pu}) must be <= 0 <= fdbd2 ({self.fdbd2_pu})")
+
+    def compensated_voltage(self, u: PlantInputs):
+        """Vc [pu]: line drop compensation (VCFlag = 1) or reactive droop (VCFlag = 0)."""
+        if self.vcflag:
+            d_re = u.v_re_pu - (self.rc_pu * u.i_re_pu - self.xc_pu * u.i_im_pu)
+            d_im = u.v_im_pu - (self.rc_pu * u.i_im_pu + self.xc_pu * u.i_re_pu)
+            return jnp.hypot(d_re, d_im)
+        return jnp.hypot(u.v_re_pu, u.v_im_pu) + self.kc * u.q_pu
+
+    def _internals(self, state, u: PlantInputs, refs: PlantReferences):
+        vf, _ = _lag(self.compensated_voltage(u), state[0], self.t_fltr_s)
+        qf, _ = _lag(u.q_pu, state[1], self.t_fltr_s)
+        err = refs.v_ref_pu - vf if self.refflag else refs.q_ref_pu - qf
+        e = jnp.clip(deadband(err, self.dbd1_pu, self.dbd2_pu), self.e_min_pu, self.e_max_pu)
+        q_raw = self.kp * e + state[2]
+        q_pi = jnp.clip(q_raw, self.q_min_pu, self.q_max_pu)
+        pf, _ = _lag(u.p_pu, state[4], self.t_p_s)
+        ef = deadband(-u.freq_dev_pu, self.fdbd1_pu, self.fdbd2_pu)
+        droop = jnp.minimum(self.ddn_pu * ef, 0.0) + jnp.maximum(self.dup_pu * ef, 0.0)
+        ep = jnp.clip(refs.p_ref_pu - pf + droop, self.fe_min_pu, self.fe_max_pu)
+        p_raw = self.kpg * ep + state[5]
+        p_pi = jnp.clip(p_raw, self.p_min_pu, self.p_max_pu)
+        return e, q_raw, q_pi, ep, p_raw, p_pi
+
+    def outputs(self, state, u: PlantInputs, refs: PlantReferences):
+        """(Pref, Qext) [pu]: the references the plant sends to the electrical controls."""
+        _, _, q_pi, _, _, p_pi = self._internals(state, u, refs)
+        q_ext, _ = _lead_lag(q_pi, state[3], self.t_ft_s, self.t_fv_s)
+        p_ref, _ = _lag(p_pi, state[6], self.t_g_s)
+        return (p_ref if self.fflag else refs.p_ref_pu + 0.0 * p_ref), q_ext
+
+    def vector_field(self, state, u: PlantInputs, refs: PlantReferences):
+        """d(state)/dt."""
+        _, d_vf = _lag(self.compensated_voltage(u), state[0], self.t_fltr_s)
+        _, d_qf = _lag(u.q_pu, state[1], self.t_fltr_s)
+        e, q_raw, q_pi, ep, p_raw, p_pi = self._internals(state, u, refs)
+        run = jnp.hypot(u.v_re_pu, u.v_im_pu) >= self.vfrz_pu
+        d_xq = jnp.where(run, _blocked(q_raw, self.ki * e, self.q_min_pu, self.q_max_pu), 0.0)
+        _, d_ll = _lead_lag(q_pi, state[3], self.t_ft_s, self.t_fv_s)
+        _, d_pf = _lag(u.p_pu, state[4], self.t_p_s)
+        d_xp = _blocked(p_raw, self.kig * ep, self.p_min_pu, self.p_max_pu)
+        _, d_lag = _lag(p_pi, state[6], self.t_g_s)
+        if not self.fflag:
+            d_pf, d_xp, d_lag = d_pf * 0.0, d_xp * 0.0, d_lag * 0.0
+        return jnp.stack([d_vf, d_qf, d_xq, d_ll, d_pf, d_xp, d_lag])
+
+    def initial_state(self, u: PlantInputs, p_ref, q_ext):
+        """(state, PlantReferences): the steady state sending ``p_ref`` and ``q_ext`` [pu] at
+        the measurements ``u`` (frequency deviation 0, no limit active)."""
+        vc = self.compensated_voltage(u)
+        q = u.q_pu + 0.0 * vc
+        state = jnp.stack([vc, q, q_ext + 0.0 * vc, q_ext + 0.0 * vc, u.p_pu + 0.0 * vc,
+                           p_ref + 0.0 * vc, p_ref + 0.0 * vc])
+        return state, PlantReferences(vc, q, u.p_pu + 0.0 * vc)
+
+
+# --- PSS/E records ----------------------------------------------------------------------------
+
+IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REECA1": REECA1, "REPCA1": REPCA1}
+"""The inverter-based resource models by their PSS/E name."""
+
+IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REECA1": "electrical", "REPCA1": "plant"}
+"""What each model is in a plant: the converter, its electrical controls, the plant controller."""
+
+_VDL = ("Vq1", "Iq1", "Vq2", "Iq2", "Vq3", "Iq3", "Vq4", "Iq4",
+        "Vp1", "Ip1", "Vp2", "Ip2", "Vp3", "Ip3", "Vp4", "Ip4")
+
+IBR_FIELDS: dict[str, tuple[str, ...]] = {
+    "REGCA1": ("Lvplsw", "Tg", "Rrpwr", "Brkpt", "Zerox", "Lvpl1", "Volim", "Lvpnt1", "Lvpnt0",
+               "Iolim", "Tfltr", "Khv", "Iqrmax", "Iqrmin", "Accel"),
+    "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG",
+               "Vdip", "Vup", "Trv", "dbd1", "dbd2", "Kqv", "Iqh1", "Iql1", "Vref0", "Iqfrz",
+               "Thld", "Thld2", "Tp", "QMax", "QMin", "VMAX", "VMIN", "Kqp", "Kqi", "Kvp", "Kvi",
+               "Vref1", "Tiq", "dPmax", "dPmin", "PMAX", "PMIN", "Imax", "Tpord", *_VDL),
+    "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag",
+               "Tfltr", "Kp", "Ki", "Tft", "Tfv", "Vfrz", "Rc", "Xc", "Kc", "emax", "emin",
+               "dbd1", "dbd2", "Qmax", "Qmin", "Kpg", "Kig", "Tp", "fdbd1", "fdbd2", "femax",
+               "femin", "Pmax", "Pmin", "Tg", "Ddn", "Dup"),
+}
+"""PSS/E names of each record's values after ``bus 'MODEL' id``, ICONs first, in PSS/E order
+(Siemens PTI, PSS/E Model Library)."""
+
+IBR_ICONS: dict[str, tuple[str, ...]] = {
+    "REGCA1": ("Lvplsw",), "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG"),
+    "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag")}
+"""The integer ICONs of each record (REPCA1's CKT is a circuit identifier, kept as text)."""
+
+IBR_PARAMETERS: dict[str, dict[str, str]] = {
+    "REGCA1": dict(zip(("lvplsw", "t_g_s", "rrpwr_pu_s", "brkpt_pu", "zerox_pu", "lvpl1_pu",
+                        "volim_pu", "lvpnt1_pu", "lvpnt0_pu", "iolim_pu", "t_fltr_s", "khv",
+                        "iqrmax_pu_s", "iqrmin_pu_s", "accel"), IBR_FIELDS["REGCA1"])),
+    "REECA1": dict(zip(("remote_bus", "pfflag", "vflag", "qflag", "pflag", "pqflag", "vdip_pu",
+                        "vup_pu", "t_rv_s", "dbd1_pu", "dbd2_pu", "kqv", "iqh1_pu", "iql1_pu",
+                        "v_ref0_pu", "iqfrz_pu", "thld_s", "thld2_s", "t_p_s", "q_max_pu",
+                        "q_min_pu", "v_max_pu", "v_min_pu", "kqp", "kqi", "kvp", "kvi",
+                        "v_ref1_pu", "t_iq_s", "dp_max_pu_s", "dp_min_pu_s", "p_max_pu",
+                        "p_min_pu", "i_max_pu", "t_pord_s"), IBR_FIELDS["REECA1"][:35])),
+    "REPCA1": dict(zip(("regulated_bus", "vcflag", "refflag", "fflag", "t_fltr_s", "kp", "ki",
+                        "t_ft_s", "t_fv_s", "vfrz_pu", "rc_pu", "xc_pu", "kc", "e_max_pu",
+                        "e_min_pu", "dbd1_pu", "dbd2_pu", "q_max_pu", "q_min_pu", "kpg", "kig",
+                        "t_p_s", "fdbd1_pu", "fdbd2_pu", "fe_max_pu", "fe_min_pu", "p_max_pu",
+                        "p_min_pu", "t_g_s", "ddn_pu", "dup_pu"),
+                       ("IREG", "VCFlag", "RefFlag", "Fflag", *IBR_FIELDS["REPCA1"][7:]))),
+}
+"""Field -> PSS/E name of each model (for the record messages and a written-back record)."""
+
+
+def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
+    """The module of an inverter-based resource's .dyr record: ``model`` (REGCA1, REECA1,
+    REPCA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
+    (:data:`IBR_FIELDS`). Raises a one-line ValueError for an unknown model, a wrong number of
+    values, a non-number, a non-integer ICON or invalid constants (named as the record names
+    them)."""
+    name = str(model).strip().upper()
+    names = IBR_FIELDS.get(name)
+    if names is None:
+        raise ValueError(f"{model!r} is not a supported inverter-based model ({', '.join(IBR_MODELS)})")
+    if len(constants) != len(names):
+        raise ValueError(f"{name}: expected {len(names)} values ({' '.join(names)}), got {len(constants)}")
+    values: dict[str, object] = {}
+    for con, value in zip(names, constants):
+        if con == "CKT":
+            values[con] = str(value).strip()
+            continue
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            raise ValueError(f"{name}: {con} is not a number: {value!r}") from None
+        if not math.isfinite(x):
+            raise ValueError(f"{name}: {con} is not finite: {value!r}")
+        if con in IBR_ICONS[name]:
+            if x != round(x):
+                raise ValueError(f"{name}: ICON {con} must be an integer, got {value!r}")
+            x = int(round(x))
+        values[con] = x
+    fields = IBR_PARAMETERS[name]
+    kwargs = {f: values[con] for f, con in fields.items()}
+    if name == "REECA1":
+        tail = [values[c] for c in _VDL]
+        kwargs.update(vdl1_v_pu=tail[0:8:2], vdl1_i_pu=tail[1:8:2], vdl2_v_pu=tail[8:16:2],
+                      vdl2_i_pu=tail[9:16:2])
+    if name == "REPCA1":
+        kwargs["branch"] = (int(values["FROM"]), int(values["TO"]), values["CKT"])
+    try:
+        return IBR_MODELS[name](**kwargs)
+    except ValueError as err:  # name the CONs as the record does
+        msg = str(err)
+        for f, con in (("vflag", "VFLAG"), ("qflag", "QFLAG"), ("pfflag", "PFFLAG"),
+                       ("pflag", "PFLAG"), ("pqflag", "PQFLAG"), ("vcflag", "VCFlag"),
+                       ("refflag", "RefFlag"), ("fflag", "Fflag")):
+            msg = msg.replace(f"{name}.{f} ", f"{con} ")
+        raise ValueError(record_message(msg, name, fields)) from None
+
+
+__all__ = ["IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+           "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
+           "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
