@@ -264,3 +264,24 @@ def test_bad_records_are_refused_in_psse_words(tmp_path, model, k, value, messag
     assert str(err.value) == message
     with pytest.raises(ValueError, match="expected 15 values"):
         ibr_from_dyr("REGCA1", [1.0] * 14)
+
+
+def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
+    from jaxdse._dyr.records import ibr_model, is_ibr
+    from jaxdse._io.psse import read_dyr
+    path = tmp_path / "case.dyr"
+    regca1 = DYR.strip().splitlines()[0].replace("8 'REGCA1'", "9 'REGCA1'")
+    path.write_text(DYR + "\n" + regca1 + "\n 9 'REECB1' '1' 0 0 1 1 0 0.9 1.1 0.02 -0.05 0.05 2 1.05"
+                    " -1.05 0 0.05 0.436 -0.436 1.1 0.9 0 0.1 0 40 0.02 99 -99 1 0 1.7 0.02 /\n"
+                    + DYR.strip().splitlines()[0].replace("8 'REGCA1'", "10 'REGCA1'") + "\n"
+                    " 11 'GENCLS' '1' 3.0 0.0 /\n")
+    dyr = read_dyr(path)
+    full = ibr_model(dyr, 8, "1")
+    assert full.missing == [] and isinstance(full.unit, IbrUnit)
+    assert full.structure == ("REGCA1", "REECA1", "REPCA1")
+    assert any("taken at the terminal" in n for n in full.notes)
+    b = ibr_model(dyr, 9, "1")
+    assert b.unit is None and any("REECB1 is not simulated" in m for m in b.missing)
+    alone = ibr_model(dyr, 10, "1")
+    assert alone.unit is None and any("no electrical record (REECA1)" in m for m in alone.missing)
+    assert is_ibr(dyr, 8, "1") and not is_ibr(dyr, 11, "1")

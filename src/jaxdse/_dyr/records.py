@@ -20,8 +20,10 @@ from .._io.psse import (
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
+from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
+from .ibr_unit import IbrUnit
 from .unit import DyrUnit
 
 PSSE_MACHINE_MODELS = frozenset({
@@ -42,6 +44,14 @@ PSSE_STABILISER_MODELS = frozenset({
     "PSS2C", "PSS3B", "PSS4B", "PTIST1", "PTIST3", "ST2CUT", "STAB1", "STAB2A", "STAB3",
     "STAB4", "STABNI", "STBSVC"})
 """Stabiliser models of the PSS/E model library (simulated or not)."""
+PSSE_IBR_MODELS: dict[str, str] = {
+    "REGCA1": "converter", "REGCB1": "converter", "REGCC1": "converter", "REGFM_A1": "converter",
+    "REGFM_B1": "converter", "REGCV1": "converter", "REGCV2": "converter",
+    "REECA1": "electrical", "REECB1": "electrical", "REECCU1": "electrical", "REECDU1": "electrical",
+    "REPCA1": "plant", "REPCB1": "plant", "WTDTA1": "wind", "WTARA1": "wind", "WTPTA1": "wind",
+    "WTTQA1": "wind"}
+"""Inverter-based resource models (WECC second generation, grid-forming, type-3 wind; simulated
+or not) and their role in a plant."""
 
 
 @dataclass
@@ -60,6 +70,72 @@ class UnitModel:
     def structure(self) -> tuple[str, ...]:
         """The model names in a fixed order: units of one structure share one compiled call."""
         return tuple(self.models.get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
+
+
+@dataclass
+class IbrModel:
+    """One inverter-based plant's .dyr model, or why it has none."""
+
+    unit: IbrUnit | None
+    models: dict[str, str] = field(default_factory=dict)
+    """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1"} of the records used."""
+    missing: list[str] = field(default_factory=list)
+    """Why the plant has no .dyr model (one line each); empty when ``unit`` is set."""
+    notes: list[str] = field(default_factory=list)
+    """What a reader should know about the model used (measurements taken at the terminal, ...)."""
+
+    @property
+    def structure(self) -> tuple[str, ...]:
+        """The model names in a fixed order: plants of one structure share one compiled call."""
+        return tuple(self.models.get(k, "-") for k in ("converter", "electrical", "plant"))
+
+
+def is_ibr(dyr: DyrData, bus: int, machine_id: str) -> bool:
+    """True when generator (``bus``, ``machine_id``) has an inverter-based resource record."""
+    return any(r.model in PSSE_IBR_MODELS for r in dyr.unit_records(bus, machine_id))
+
+
+def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
+    """The :class:`IbrUnit` of generator (``bus``, ``machine_id``) from its REGCA1, REECA1 and
+    (optional) REPCA1 records, or why there is none (a record of a model not simulated, a
+    second record of one role, a missing converter or electrical control, a record that does
+    not read)."""
+    out = IbrModel(unit=None)
+    parts: dict[str, object] = {}
+    for rec in dyr.unit_records(bus, machine_id):
+        role = PSSE_IBR_MODELS.get(rec.model)
+        if role is None:
+            out.notes.append(f"{record_label(rec)}: not an inverter-based resource model; left out")
+            continue
+        if role in out.models:
+            out.missing.append(f"{record_label(rec)}: a second {role} record for this generator")
+            continue
+        out.models[role] = rec.model
+        if rec.model not in IBR_MODELS:
+            out.missing.append(f"{record_label(rec)}: model {rec.model} is not simulated "
+                               f"({', '.join(IBR_MODELS)})")
+            continue
+        if rec.problem:
+            out.missing.append(rec.problem)
+            continue
+        try:
+            parts[role] = ibr_from_dyr(rec.model, rec.constants)
+        except ValueError as err:
+            out.missing.append(f"{record_label(rec)}: {str(err).splitlines()[0]}")
+    for role in ("converter", "electrical"):
+        if role not in out.models:
+            out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
+                               f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
+    if not out.missing:
+        out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
+                           plant=parts.get("plant"))
+        plant = parts.get("plant")
+        if plant is not None and (plant.regulated_bus not in (0, bus) or plant.branch[0] != 0):
+            out.notes.append(f"REPCA1: regulated bus {plant.regulated_bus} and branch "
+                             f"{plant.branch[0]}-{plant.branch[1]} taken at the terminal")
+        if "plant" not in out.models:
+            out.notes.append("no plant controller record: Pref and Qext held at their initial values")
+    return out
 
 
 def record_kind(record: DyrRecord) -> str:
@@ -133,5 +209,5 @@ def unit_model(dyr: DyrData, raw: RawCase, bus: int, machine_id: str, *,
     return out
 
 
-__all__ = ["PSSE_EXCITER_MODELS", "PSSE_MACHINE_MODELS", "PSSE_STABILISER_MODELS", "UnitModel",
-           "record_kind", "unit_model"]
+__all__ = ["PSSE_EXCITER_MODELS", "PSSE_IBR_MODELS", "PSSE_MACHINE_MODELS", "PSSE_STABILISER_MODELS",
+           "IbrModel", "UnitModel", "ibr_model", "is_ibr", "record_kind", "unit_model"]

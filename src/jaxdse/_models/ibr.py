@@ -44,6 +44,9 @@ from .base import record_message
 
 LVPL_OPEN_PU = 9999.0
 """The LVPL characteristic above its breakpoint (no limit), as PSS/E documents it [pu]."""
+LVPL_RESET_S = 1e-3
+"""REGCA1: an Ip state above a falling LVPL is brought to it with this time constant [s] (PSS/E
+resets the state of a non-windup limit to the limit; an ODE relaxes it, fast against Tg)."""
 V_FLOOR_PU = 0.01
 """Dividers by a filtered voltage use max(V, this) [pu] (as the WECC diagrams do)."""
 
@@ -68,8 +71,9 @@ class REGCA1(eqx.Module):
         Iq_inj = max(Iq - Khv (|V| - Volim), Iolim) while |V| > Volim, else Iq   (HVRCM)
 
     States: [Ip, Iq, Vf]. When LVPL falls below the Ip state, the output is LVPL at once and the
-    state relaxes to it with Tg (the non-windup limit of a lag whose limit moves; PSS/E resets
-    the state). The rate limits act at all times. Accel (the network-solution acceleration of
+    state follows it within ``LVPL_RESET_S`` (the non-windup limit of a lag whose limit moves:
+    PSS/E resets the state), so that Ip recovers from LVPL at the Rrpwr ramp after a dip. The
+    rate limits act at all times. Accel (the network-solution acceleration of
     PSS/E's Norton source) has no role with the voltage imposed and is kept for the record.
     """
 
@@ -143,7 +147,7 @@ class REGCA1(eqx.Module):
         ip, iq, vf = state[0], state[1], state[2]
         ceiling = self.lvpl(vf)
         d_ip = jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s)
-        d_ip = jnp.where(ip > ceiling, (ceiling - ip) / self.t_g_s, _blocked(ip, d_ip, -jnp.inf, ceiling))
+        d_ip = jnp.where(ip > ceiling, (ceiling - ip) / LVPL_RESET_S, _blocked(ip, d_ip, -jnp.inf, ceiling))
         d_iq = jnp.clip((iqcmd - iq) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
         _, d_vf = _lag(vt, vf, self.t_fltr_s)
         return jnp.stack([d_ip, d_iq, d_vf])
@@ -688,5 +692,6 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
 
 
 __all__ = ["IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+           "LVPL_RESET_S",
            "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
