@@ -390,7 +390,6 @@ FLEET_NOT_IN = {
     "not recorded": "not in the fleet file: no plant of [channels] or [[unit]] found a recording of it",
     "out of service": "out of service",
     "no dynamic records": "in service without dynamic records",
-    "converter": "converter-interfaced sources (not synchronous machines)",
     "not a generator": "not generators: static var compensators or STATCOMs in the generator data",
     "duplicate": "second generator records for the same bus and ID (the first is used)",
 }
