@@ -245,6 +245,27 @@ def block() -> str:
                 f"the validation of these true models: pass {rc['validation']['pass']}, fail "
                 f"{rc['validation']['fail']} (median RMS error of Q "
                 f"{rc['median_rms_percent_mbase']['Q_t']:.2f} % of MBASE).")
+        rr = tb.get("real_case_fleet_repaired")
+        if rr:
+            out.append(
+                f"- **The repaired case end to end** (`{rr['command']}`, load average "
+                f"{rr['load_average_at_start'][0]:.1f} at the start): ACTIVSg2000 after `jaxdse check --repair` "
+                f"(repaired.raw and repaired.dyr): {rr['units_run']} of its {rr['synchronous_units']} "
+                f"synchronous units run, {rr['played_back_with_own_records']} played back with their own "
+                f"records; the validation of these true models: pass {rr['validation'].get('pass', 0)}, fail "
+                f"{rr['validation'].get('fail', 0)} (median RMS error of P "
+                f"{rr['median_rms_percent_mbase']['P_t']:.2f} %, Q {rr['median_rms_percent_mbase']['Q_t']:.2f} "
+                f"% of MBASE); {rr['cold']['wall_s']:.0f} s cold, {rr['warm']['wall_s']:.0f} s warm.")
+        cs = tb.get("check_stress")
+        if cs:
+            parts = []
+            for name, c in cs["cases"].items():
+                walls = ", ".join(f"{r['wall_s']:.0f}" for r in c["runs"])
+                parts.append(f"{name}: {c['runs_done']} runs, {c['hangs']} hung, outcomes equal in every run: "
+                             f"{'yes' if c['outcomes_equal_to_first'] else 'no'}, wall s {walls}")
+            out.append(f"- **`jaxdse check` back to back under load** (`benchmarks/check_stress.py`, "
+                       f"{cs['load_processes']} busy processes beside it, a run over {cs['limit_s']:.0f} s counted "
+                       f"as hung): " + "; ".join(parts) + ".")
         fs = tb.get("fleet_scaling")
         if fs:
             out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "
