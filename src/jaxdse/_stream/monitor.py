@@ -767,7 +767,8 @@ class Monitor:
         if cfg.view is not None:
             from .view import LiveView
 
-            self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view)
+            self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view,
+                                 floor_MWs=None if cfg.inertia is None else cfg.inertia.floor_MWs)
         self.processing = []     # seconds of the main thread per data frame (updates included)
 
     def emit(self, updates: list[Update], stream: _Stream | None = None, timed: bool = True):
@@ -947,6 +948,8 @@ class Monitor:
         if self._jsonl is not None:
             self._jsonl.write("".join(json.dumps(x) + "\n" for x in lines))
             self._jsonl.flush()
+        if self.view is not None:
+            self.view.add_inertia(lines)
         floor = self.cfg.inertia.floor_MWs
         for a in self.inertia.latest:
             was = self.inertia_alarms.get(a.area, False)
