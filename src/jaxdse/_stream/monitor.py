@@ -745,6 +745,13 @@ class Monitor:
         self.monitor_s = []      # [s of wall time] per emission, from the newest frame's arrival to it
         self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
         self._next_report = None
+        self.inertia = None
+        if cfg.inertia is not None:
+            from .inertia import tracker_for
+
+            self.inertia = tracker_for(cfg.units, self.est, cfg.inertia, self.log)
+            for s in self.streams:
+                s.tracker = self.inertia
         self.publisher = None
         if cfg.publish is not None:
             opts = dict(cfg.publish)
@@ -755,14 +762,9 @@ class Monitor:
 
             f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
             self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
-                                       log=self.log, **opts)
-        self.inertia = None
-        if cfg.inertia is not None:
-            from .inertia import tracker_for
-
-            self.inertia = tracker_for(cfg.units, self.est, cfg.inertia, self.log)
-            for s in self.streams:
-                s.tracker = self.inertia
+                                       log=self.log, **opts, **({} if self.inertia is None else {
+                                           "areas": self.inertia.areas + ["system"],
+                                           "floor_MWs": cfg.inertia.floor_MWs}))
         self.view = None
         if cfg.view is not None:
             from .view import LiveView
@@ -950,6 +952,12 @@ class Monitor:
             self._jsonl.flush()
         if self.view is not None:
             self.view.add_inertia(lines)
+        if self.publisher is not None:
+            by_t = defaultdict(list)
+            for x in lines:
+                by_t[x["t"]].append(x)
+            for t in sorted(by_t):
+                self.publisher.publish_inertia(t, by_t[t])
         floor = self.cfg.inertia.floor_MWs
         for a in self.inertia.latest:
             was = self.inertia_alarms.get(a.area, False)
