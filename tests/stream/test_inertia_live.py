@@ -101,6 +101,10 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
         assert x["E_ci95"][0] <= truth <= x["E_ci95"][1]
         assert x["rocof_hz_per_s"] == pytest.approx(50 * 1000 / 2 / x["E_MWs"])
     assert summary["inertia"][-1]["area"] == "system" and summary["inertia"][-1]["below_floor"] is True
+    # lines emitted once the stream's time passes theirs (stream seconds: at 20x the compile's
+    # wall seconds are hundreds of them here, as for the units' delay_s)
+    d = summary["inertia_delay_s"]
+    assert 0 <= d["median"] <= d["p99"] <= d["max"], d
     alarms = [x for x in log if x.startswith("ALARM inertia")]          # once per area, not every line
     assert len(alarms) == 2 and "below the floor 20 GW s" in alarms[-1] and "system" in alarms[-1]
     # the live page's panel holds the same lines, the floor and the alarm state

@@ -405,6 +405,9 @@ SUMMARY_KEYS = {
                  "frame (the estimate's own wait: its lookahead and the reorder buffer) plus this times the pace",
     "pace": "per stream, stream seconds per wall second (1 in real time; 5 for pmu-sim --speed 5)",
     "processing_ms_per_frame": "the main thread's time per data frame, its updates included [ms]",
+    "inertia_delay_s": "with [inertia], per set of area lines, stream seconds from the lines' time to their "
+                       "emission (the area estimate holds each unit's latest update, itself delay_s after its "
+                       "window's last frame)",
 }
 UNIT_COUNTS = {
     "unusable_samples": "per unit, samples not used: STAT data error or lost sync, NaN, or a value outside "
@@ -738,6 +741,7 @@ class Monitor:
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
         self.alarms = {}
         self.inertia_alarms = {}   # area -> E below the floor
+        self.inertia_delays = []   # [s of stream time] per inertia line set, from its time to its emission
         self.updates = 0
         self.latest = {}
         self.delays = []         # [s of stream time] per update, from the window's last frame
@@ -926,7 +930,7 @@ class Monitor:
                     s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
                 self.emit(s.on_data(x), s)
                 if self.inertia is not None and s.released is not None:
-                    self._inertia_lines(self.inertia.tick(s.released / s.rate))
+                    self._inertia_lines(self.inertia.tick(s.released / s.rate), s)
             if isinstance(x, c3.DataFrame) and len(self.processing) < MAX_TIMINGS:
                 self.processing.append(time.perf_counter() - t0)
         elif kind == "counts":
@@ -943,10 +947,15 @@ class Monitor:
             if s.counts["disconnects"] + s.counts["connect_failures"]:
                 self.log(f"stream {k}: reconnected to {x}")
 
-    def _inertia_lines(self, lines: list[dict]):
-        """The system inertia's lines to ``updates.jsonl``; the floor's alarm in the log."""
+    def _inertia_lines(self, lines: list[dict], stream: _Stream | None = None):
+        """The system inertia's lines to ``updates.jsonl``; the floor's alarm in the log; the
+        delay from a line's time to its emission on ``stream``'s clock (``inertia_delay_s``)."""
         if not lines:
             return
+        if stream is not None and len(self.inertia_delays) < MAX_TIMINGS:
+            now = stream.clock.now(time.monotonic())
+            if now is not None:
+                self.inertia_delays.extend(now - t for t in sorted({x["t"] for x in lines}))
         if self._jsonl is not None:
             self._jsonl.write("".join(json.dumps(x) + "\n" for x in lines))
             self._jsonl.flush()
@@ -996,6 +1005,9 @@ class Monitor:
                         for s in self.streams],
             "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
+            "inertia_delay_s": None if not self.inertia_delays else {
+                "median": float(np.median(self.inertia_delays)), "p99": float(np.quantile(self.inertia_delays, 0.99)),
+                "max": float(np.max(self.inertia_delays))},
             "inertia": None if self.inertia is None else [
                 {**a.line(None), "rocof_ci95": a.rocof_ci95, "rocof_reason": a.rocof_reason,
                  "units_stale": a.units_stale, "units_without_h": a.units_without_h, "below_floor": a.below_floor}
