@@ -5,10 +5,11 @@ with the .dyr playback, end to end.
     python benchmarks/real_case_fleet.py --units 26      # a quick run: 2 units of each chain
     python benchmarks/real_case_fleet.py --no-write      # measure, leave results.json alone
     jaxdse check experiments/activsg2000/case.toml --repair --out rep/
-    python benchmarks/real_case_fleet.py --dyr rep/repaired.dyr   # the case with its limits repaired
+    python benchmarks/real_case_fleet.py --raw rep/repaired.raw --dyr rep/repaired.dyr  # repaired
 
-1. Read ACTIVSg2000 (``../shared/data/activsg2000``, or ``--case DIR``; ``--dyr FILE``: another
-   .dyr, e.g. the ``repaired.dyr`` of ``jaxdse check --repair``) with ``jd.read_raw`` /
+1. Read ACTIVSg2000 (``../shared/data/activsg2000``, or ``--case DIR``; ``--dyr FILE`` and
+   ``--raw FILE``: another .dyr and .raw, e.g. the ``repaired.dyr`` and ``repaired.raw`` of
+   ``jaxdse check --repair``) with ``jd.read_raw`` /
    ``jd.read_dyr``; every in-service generator with a machine record is a synchronous unit.
    ``jd.unit_model`` builds its model from its own records; a unit whose model cannot be built
    (a model not simulated, a data problem) is listed with the reason and left out, as ``jaxdse
@@ -47,7 +48,7 @@ with the .dyr playback, end to end.
    their trace, lowering and compile seconds; programs under 0.1 s (small array ops) are
    counted apart.
 
-Writes ``real_case_fleet`` (with ``--dyr``: ``real_case_fleet_repaired``; ``--key``) into
+Writes ``real_case_fleet`` (with ``--dyr`` or ``--raw``: ``real_case_fleet_repaired``; ``--key``) into
 ``benchmarks/results.json`` (other keys kept). Only the public API (``import jaxdse as jd``) is used.
 """
 
@@ -338,6 +339,8 @@ def main() -> None:
     ap.add_argument("--case", type=Path, default=CASE, help="folder with ACTIVSg2000.RAW and .dyr")
     ap.add_argument("--dyr", type=Path, default=None,
                     help="a .dyr to use instead of the case's (e.g. repaired.dyr of `jaxdse check --repair`)")
+    ap.add_argument("--raw", type=Path, default=None,
+                    help="a .raw to use instead of the case's (e.g. repaired.raw of `jaxdse check --repair`)")
     ap.add_argument("--key", default=None, help="results.json key (default: real_case_fleet, with --dyr "
                     "real_case_fleet_repaired)")
     ap.add_argument("--keep", type=Path, default=None, help="keep the recordings and reports here")
@@ -354,9 +357,11 @@ def main() -> None:
     import jaxdse as jd
 
     dyr_file = args.dyr or args.case / DYR
-    raw = jd.read_raw(args.case / RAW, strict=False)
+    raw_file = args.raw or args.case / RAW
+    raw = jd.read_raw(raw_file, strict=False)
     dyr = jd.read_dyr(dyr_file, strict=False)
-    repaired = sorted({f"B{r.bus}_G{r.id}" for r in dyr.records if r.changes})
+    repaired = sorted({f"B{r.bus}_G{r.id}" for r in dyr.records if r.changes}
+                      | {f"B{g.bus}_G{g.id.strip()}" for g in raw.generators if g.changes})
     built, left, bare = case_units(raw, dyr, jd)
     chosen = choose(built, args.units)
     chains = Counter("/".join(b[1].structure) for b in chosen)
@@ -371,7 +376,7 @@ def main() -> None:
     gen_s = time.perf_counter() - t0
     pd.DataFrame(cols).to_csv(work / "events.csv", index=False, float_format="%.8g")
     (work / "fleet.toml").write_text(FLEET_TOML.format(
-        raw=str((args.case / RAW).resolve()), dyr=str(dyr_file.resolve()), sbase=raw.sbase_mva))
+        raw=str(Path(raw_file).resolve()), dyr=str(dyr_file.resolve()), sbase=raw.sbase_mva))
     print(f"recordings: {len(events)} units in {gen_s:.1f} s ({len(failed)} failed), "
           f"{(work / 'events.csv').stat().st_size / 1e6:.0f} MB CSV in {work}", flush=True)
 
@@ -393,8 +398,9 @@ def main() -> None:
     chain_names = sorted(chains)
     result = {
         "command": "python benchmarks/real_case_fleet.py" + (f" --units {args.units}" if args.units else "")
-                   + (f" --dyr {args.dyr}" if args.dyr else ""),
-        "case": "ACTIVSg2000 (rev 33 .raw + .dyr)" + (f", .dyr {dyr_file.name}" if args.dyr else ""),
+                   + (f" --raw {args.raw}" if args.raw else "") + (f" --dyr {args.dyr}" if args.dyr else ""),
+        "case": "ACTIVSg2000 (rev 33 .raw + .dyr)" + (f", .raw {Path(raw_file).name}" if args.raw else "")
+                + (f", .dyr {dyr_file.name}" if args.dyr else ""),
         "synchronous_units": len(built) + len(left),
         "units_on_repaired_records": len(repaired),
         "units_on_repaired_records_run": sum(f"B{g.bus}_G{g.id.strip()}" in repaired for g, _ in chosen),
@@ -430,7 +436,7 @@ def main() -> None:
     if not args.no_write:
         path = HERE / "results.json"
         doc = json.loads(path.read_text()) if path.exists() else {}
-        doc[args.key or ("real_case_fleet_repaired" if args.dyr else "real_case_fleet")] = result
+        doc[args.key or ("real_case_fleet_repaired" if args.dyr or args.raw else "real_case_fleet")] = result
         path.write_text(json.dumps(doc, indent=2) + "\n")
 
 

@@ -245,6 +245,27 @@ def block() -> str:
                 f"the validation of these true models: pass {rc['validation']['pass']}, fail "
                 f"{rc['validation']['fail']} (median RMS error of Q "
                 f"{rc['median_rms_percent_mbase']['Q_t']:.2f} % of MBASE).")
+        rr = tb.get("real_case_fleet_repaired")
+        if rr:
+            out.append(
+                f"- **The repaired case end to end** (`{rr['command']}`, load average "
+                f"{rr['load_average_at_start'][0]:.1f} at the start): ACTIVSg2000 after `jaxdse check --repair` "
+                f"(repaired.raw and repaired.dyr): {rr['units_run']} of its {rr['synchronous_units']} "
+                f"synchronous units run, {rr['played_back_with_own_records']} played back with their own "
+                f"records; the validation of these true models: pass {rr['validation'].get('pass', 0)}, fail "
+                f"{rr['validation'].get('fail', 0)} (median RMS error of P "
+                f"{rr['median_rms_percent_mbase']['P_t']:.2f} %, Q {rr['median_rms_percent_mbase']['Q_t']:.2f} "
+                f"% of MBASE); {rr['cold']['wall_s']:.0f} s cold, {rr['warm']['wall_s']:.0f} s warm.")
+        cs = tb.get("check_stress")
+        if cs:
+            parts = []
+            for name, c in cs["cases"].items():
+                walls = ", ".join(f"{r['wall_s']:.0f}" for r in c["runs"])
+                parts.append(f"{name}: {c['runs_done']} runs, {c['hangs']} hung, outcomes equal in every run: "
+                             f"{'yes' if c['outcomes_equal_to_first'] else 'no'}, wall s {walls}")
+            out.append(f"- **`jaxdse check` back to back under load** (`benchmarks/check_stress.py`, "
+                       f"{cs['load_processes']} busy processes beside it, a run over {cs['limit_s']:.0f} s counted "
+                       f"as hung): " + "; ".join(parts) + ".")
         fs = tb.get("fleet_scaling")
         if fs:
             out.append("- **Fleet scaling** (`benchmarks/fleet_scaling.py`, `jd.assess_units`, 90 s at 30 frames/s "
@@ -275,7 +296,8 @@ def block() -> str:
                    f"{h['tuned']['median_convergence_time_s']:.0f} s "
                    f"({tune['median_convergence_speedup']:.1f}x).")
     checks = [(name, load(f"experiments/{folder}/check.json"))
-              for name, folder in (("ACTIVSg2000", "activsg2000"), ("Nordic 44 (ANDES's case)", "nordic44"))]
+              for name, folder in (("ACTIVSg2000", "activsg2000"), ("Texas 7k", "texas7k"),
+                                   ("Nordic 44 (ANDES's case)", "nordic44"))]
     parts = []
     for name, doc in checks:
         if doc is None:
@@ -286,8 +308,9 @@ def block() -> str:
         if a:
             left = ", ".join(f"{a[k]} {k}" for k in ("out of service", "no dynamic records", "converter",
                                                     "not a generator", "duplicate") if a.get(k))
+            by = ", ".join(f"{n} {k}" for k, n in a.get("checked_by_category", {}).items())
             text += f" (of {a['generator_records']} generator records: {a['checked']} checked" + \
-                (f", {left}" if left else "") + ")"
+                (f" ({by})" if by else "") + (f", {left}" if left else "") + ")"
         parts.append(text)
     fixed = load("experiments/activsg2000/repaired/check.json")
     repairs = ROOT / "experiments/activsg2000/repairs.csv"
@@ -297,6 +320,26 @@ def block() -> str:
                      f"then {fixed['summary']['pass']} of {fixed['summary']['units']} pass")
     if parts:
         out.append("- **Case checks** (`jaxdse check`, `experiments/*/check.json`): " + "; ".join(parts) + ".")
+    si = load("experiments/system_inertia/results.json")
+    if si and si.get("bench"):
+        b = si["bench"]
+        rows = "; ".join(f"{r['case']} {r['event'].replace('_', ' ')} {r['E_error_percent']:+.2f} % "
+                         f"(measured part {r['E_measured_error_percent']:+.2f} %, "
+                         f"{'covered' if r['covers'] else 'not covered'})" for r in b["rows"])
+        text = (f"- **System inertia** (`experiments/system_inertia/results.json`, `{b['command']}`): the ANDES "
+                f"bench, every unit measured: system E within 2 % of sum H_true S on {b['within_2pct']} of "
+                f"{b['recordings']} recordings, the 95 % interval covering on {b['covers']} ({rows}); a third "
+                f"of the units unmeasured: covering on {b['third_unmeasured_covers']}, measured share off by at "
+                f"most {100 * b['max_abs_share_error']:.1f} points")
+        o = si.get("osl")
+        if o:
+            sys_row = next((a for a in o["areas"] if a["area"] == "system"), None)
+            if sys_row:
+                text += (f"; OSL case 1 (one value per recording): system E {sys_row['E_MWs'] / 1e3:.1f} GW s "
+                         f"[{sys_row['E_ci95'][0] / 1e3:.1f}, {sys_row['E_ci95'][1] / 1e3:.1f}], "
+                         f"{100 * sys_row['measured_share']:.0f} % measured, commitment figure "
+                         f"{sys_row['E_commitment_MWs'] / 1e3:.1f} GW s")
+        out.append(text + ".")
     return "\n".join(out)
 
 

@@ -7,8 +7,9 @@ GENROU X''d = 0.005 pu, Xl = 0.1 pu, a fastest mode near -3200 1/s that the fixe
 cannot follow: run again with Kvaerno5, and passes). Eight more generator records, one of each
 kind the check accounts for: a machine record of a model jaxdse does not know (GENSAL renamed
 GENSAX), a governor record without a machine record, an out-of-service unit, a generator without
-dynamic records, a static var compensator (CSVGN1), a converter (REGCA1/REECA1), a second record
-of one generator; and .dyr records of no generator (a bus not in the .raw, an ID not on its bus,
+dynamic records, a static var compensator (CSVGN1), an inverter-based plant (REGCA1, REECA1,
+REPCA1: checked, and passes), one whose converter model is not simulated (WT4G1: a unit, not
+supported), a second record of one generator; and .dyr records of no generator (a bus not in the .raw, an ID not on its bus,
 a USRBUS). Its check.json fields, the exit status, the console table; the case loader; the
 limits found at the initial state. The three units that are simulated share one model
 structure: one compile, and one more for Kvaerno5.
@@ -70,7 +71,8 @@ EXTRA_GENERATORS = {(10, "1", 1): "GENSAX (renamed GENSAL): machine model unknow
                     (3, "2", 0): "out of service, with a machine record",
                     (4, "1", 1): "no dynamic records",
                     (5, "1", 1): "CSVGN1: not a generator",
-                    (9, "1", 1): "REGCA1, REECA1: converter",
+                    (9, "1", 1): "REGCA1, REECA1, REPCA1: an inverter-based plant",
+                    (13, "2", 1): "WT4G1: an inverter-based plant, model not simulated",
                     (12, "1", 1): "no dynamic records",
                     (12, "1", 1, "again"): "its second record: duplicate"}
 EXTRA_RECORDS = """10 'GENSAX' 1 5 0.05 0.1 3 0 1.8 1.7 0.3 0.2 0.15 0.1 0.3 /
@@ -78,8 +80,13 @@ EXTRA_RECORDS = """10 'GENSAX' 1 5 0.05 0.1 3 0 1.8 1.7 0.3 0.2 0.15 0.1 0.3 /
 11 'TGOV1' 1 0.05 0.05 1.05 0.3 1 2.1 0 /
 3 'GENROU' 2 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
 5 'CSVGN1' 1 5 0.1 0.05 100 0.01 1 0 100 /
-9 'REGCA1' 1 1 0.02 10 0.9 0.5 1.22 1.2 0.8 0.4 -1.3 0.02 0 -99 99 0.7 /
-9 'REECA1' 1 0 0 0 0 0.9 1.1 0 0 0 0 0.1 -0.1 0 0 1 -1 0 0 0 1 0 0 1 /
+9 'REGCA1' '1' 1 0.02 10 0.9 0.4 1.22 1.2 0.8 0.4 -1.3 0.02 0.7 999 -999 0.7 /
+9 'REECA1' '1' 0 0 1 0 0 0 0.9 1.1 0.02 -0.05 0.05 2 1.05 -1.05 0 0 0 0 0.05 0.436 -0.436
+   1.1 0.9 0 0.1 0 40 0 0.02 99 -99 1 0 1.7 0.02
+   0.2 1.5 0.5 1.5 1 1.5 1.5 1.5  0.2 1.5 0.5 1.5 1 1.5 1.5 1.5 /
+9 'REPCA1' '1' 0 9 7 '1' 0 1 1 0.02 18 5 0 0.075 0 0 0 0 0.1 -0.1 0 0 0.436 -0.436 0.1 0.05
+   0.25 0 0 999 -999 999 -999 0.1 20 0 /
+13 'WT4G1' 2 0.02 0.5 0.9 1.11 1.2 2 2 0.02 /
 99 'GENROU' 1 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
 13 'GENROU' 7 6.5 0.06 0.2 0.05 5 0 1.8 1.75 0.6 0.8 0.34 0.15 0.09 0.38 /
 14 'USRBUS' 'PLNTBU1' 504 0 7 28 7 15 14 13 14 '1' 0 1 /
@@ -87,7 +94,7 @@ EXTRA_RECORDS = """10 'GENSAX' 1 5 0.05 0.1 3 0 1.8 1.7 0.3 0.2 0.15 0.1 0.3 /
 
 
 def _more(text: str) -> str:
-    """The eight generator records of ``EXTRA_GENERATORS`` after the five of the case."""
+    """The nine generator records of ``EXTRA_GENERATORS`` after the five of the case."""
     rows = "".join(GEN.format(bus=k[0], id=k[1], stat=k[2]) for k in EXTRA_GENERATORS)
     return text.replace("0 / End of Generator data", rows + "0 / End of Generator data")
 
@@ -104,10 +111,11 @@ def test_outcomes_reasons_and_json(checked):
     assert rc == 0  # whatever the outcomes
     doc = json.loads((out / "check.json").read_text())
     units = {e["name"]: e for e in doc["units"]}
-    assert set(units) == {"1_1", "2_1", "3_1", "6_1", "8_1", "10_1", "11_1"}
+    assert set(units) == {"1_1", "2_1", "3_1", "6_1", "8_1", "10_1", "11_1", "9_1", "13_2"}
     for e in doc["units"]:
         assert {"name", "bus", "id", "models", "outcome", "reasons"} <= set(e)
-        assert set(e["models"]) == {"machine", "exciter", "stabiliser", "governor"}
+        assert set(e["models"]) == ({"converter", "electrical", "plant"} if e["category"] == "inverter-based"
+                                    else {"machine", "exciter", "stabiliser", "governor"})
         assert e["outcome"] in ("pass", "data problem", "not supported", "fail")
         assert isinstance(e["reasons"], list) and all(isinstance(r, str) for r in e["reasons"])
     assert units["1_1"]["models"] == {"machine": "GENROU", "exciter": "ESST3A", "stabiliser": None,
@@ -138,12 +146,32 @@ def test_outcomes_reasons_and_json(checked):
     assert low["limits"][0]["con"] == "VMAX" and low["limits"][0]["bound"] == 0.25
     assert any(r.startswith("hence: not steady at t = 0") for r in low["reasons"])
     s = doc["summary"]
-    assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (7, 2, 3, 2, 0)
-    assert s["not_supported_models"] == {"EXST2": 1, "GENSAX": 1}
+    assert (s["units"], s["pass"], s["data problem"], s["not supported"], s["fail"]) == (9, 3, 3, 3, 0)
+    assert s["not_supported_models"] == {"EXST2": 1, "GENSAX": 1, "WT4G1": 1}
     assert s["data_problems"]["TGOV1 VMAX (valve0 above)"] == 1
-    assert s["compiled_programs"] == 2  # the simulated units share one structure; + Kvaerno5
+    assert s["compiled_programs"] == 3  # the simulated machines share one structure; + Kvaerno5; the plant
     page = (out / "check.html").read_text()
     assert "sortable" in page and "EXST2" in page and "data problem" in page
+
+
+def test_an_inverter_based_plant_is_checked(checked):
+    """Bus 9's REGCA1 + REECA1 (QFLAG = 0) + REPCA1 (Fflag = 1, droop Ddn = 20): steady at rest, settles after
+    the 2 % voltage step (Q answers) and the 0.1 Hz step (P falls by the droop); bus 13's WT4G1 is
+    a unit, not supported, named."""
+    _, out = checked
+    doc = json.loads((out / "check.json").read_text())
+    units = {e["name"]: e for e in doc["units"]}
+    plant = units["9_1"]
+    assert plant["category"] == "inverter-based" and plant["outcome"] == "pass", plant["reasons"]
+    assert plant["models"] == {"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1"}
+    n = plant["numbers"]
+    assert n["max_dxdt_t0"] < 1e-6 and abs(n["p_error_held_pu"]) < 1e-5 and abs(n["q_error_held_pu"]) < 1e-5
+    assert abs(n["vstep_q_change_pu"]) > 1e-3          # the voltage step moves Q
+    assert n["fstep_p_change_pu"] < -1e-3              # over-frequency: P down by the droop
+    assert any("taken at the terminal" in note for note in plant["notes"])
+    wind = units["13_2"]
+    assert wind["outcome"] == "not supported" and wind["not_simulated"] == ["WT4G1"]
+    assert "WT4G1" in wind["reasons"][0] and "not simulated" in wind["reasons"][0]
 
 
 def test_every_record_accounted_for(checked):
@@ -152,13 +180,13 @@ def test_every_record_accounted_for(checked):
     _, out = checked
     doc = json.loads((out / "check.json").read_text())
     a = doc["summary"]["accounting"]
-    assert a["generator_records"] == 5 + len(EXTRA_GENERATORS) == 13
-    assert a["checked"] == 7 and a["checked_by_category"] == {
-        "synchronous": 5, "machine model unknown": 1, "no machine record": 1}
-    assert (a["out of service"], a["no dynamic records"], a["converter"], a["not a generator"],
-            a["duplicate"]) == (1, 2, 1, 1, 1)
-    assert a["checked"] + sum(a[k] for k in ("out of service", "no dynamic records", "converter",
-                                             "not a generator", "duplicate")) == 13
+    assert a["generator_records"] == 5 + len(EXTRA_GENERATORS) == 14
+    assert a["checked"] == 9 and a["checked_by_category"] == {
+        "synchronous": 5, "inverter-based": 2, "machine model unknown": 1, "no machine record": 1}
+    assert (a["out of service"], a["no dynamic records"], a["not a generator"],
+            a["duplicate"]) == (1, 2, 1, 1)
+    assert a["checked"] + sum(a[k] for k in ("out of service", "no dynamic records",
+                                             "not a generator", "duplicate")) == 14
     units = {e["name"]: e for e in doc["units"]}
     unknown = units["10_1"]
     assert unknown["outcome"] == "not supported" and unknown["category"] == "machine model unknown"
@@ -171,7 +199,7 @@ def test_every_record_accounted_for(checked):
     rows = {(r["bus"], r["id"], r["category"]) for r in doc["not_checked"]}
     assert rows == {(3, "2", "out of service"), (4, "1", "no dynamic records"),
                     (12, "1", "no dynamic records"), (12, "1", "duplicate"),
-                    (5, "1", "not a generator"), (9, "1", "converter")}
+                    (5, "1", "not a generator")}
     assert all(r["why"] and r["line"] > 0 for r in doc["not_checked"])
     recs = {(r["model"], r["bus"], r["id"]): r for r in doc["dyr_records_not_used"]}
     assert set(recs) == {("GENROU", 99, "1"), ("GENROU", 13, "7"), ("USRBUS", 14, "PLNTBU1")}
@@ -179,7 +207,7 @@ def test_every_record_accounted_for(checked):
     assert recs[("USRBUS", 14, "PLNTBU1")]["category"] == "bus level"
     assert (a["dyr_records_orphaned"], a["dyr_records_bus_level"]) == (2, 1)
     page = (out / "check.html").read_text()
-    assert "Every generator record of case.raw: <b>13</b>" in page and "CSVGN1" in page
+    assert "Every generator record of case.raw: <b>14</b>" in page and "CSVGN1" in page
     assert "bus 99 is not in case.raw" in page
 
 
@@ -190,9 +218,10 @@ def test_out_of_service_units_checked_when_asked(tmp_path):
 
     case = load_case(_case(tmp_path, lambda t: t + EXTRA_RECORDS, raw_edit=_more))
     inv = inventory(case.raw, case.dyr)
-    assert [(a.generator.bus, a.generator.id) for a in inv.units(out_of_service=True)][-1] == (3, "2")
-    assert len(inv.units(out_of_service=True)) == len(inv.units()) + 1 == 8
-    assert sum(inv.counts().values()) == len(case.raw.generators) == 13
+    keys = [(a.generator.bus, a.generator.id) for a in inv.units(out_of_service=True)]
+    assert (3, "2") in keys and (3, "2") not in [(a.generator.bus, a.generator.id) for a in inv.units()]
+    assert len(inv.units(out_of_service=True)) == len(inv.units()) + 1 == 10
+    assert sum(inv.counts().values()) == len(case.raw.generators) == 14
 
 
 def test_console_table(checked):
@@ -201,15 +230,18 @@ def test_console_table(checked):
     _, out = checked
     text = console_table(json.loads((out / "check.json").read_text()))
     lines = text.splitlines()
-    assert "13 generator record(s), 7 unit(s) checked" in lines[0]
+    assert "14 generator record(s), 9 unit(s) checked" in lines[0]
     assert any(line.split()[:6] == ["GENROU", "ESST3A", "-", "TGOV1", "4", "2"] for line in lines)
     assert any(line.strip().startswith("2_1") and "not supported" in line for line in lines)
     assert any(line.strip().startswith("6_1") and "VMAX" in line for line in lines)
-    assert lines[-1].startswith("2 pass (28.6 %), 3 data problem, 2 not supported, 0 fail, of 7")
-    assert lines[1].split()[:2] == ["7", "checked"] and "2 machine model unknown" not in lines[1]
-    assert "5 synchronous, 1 machine model unknown, 1 no machine record" in lines[1]
-    said = {line.split()[1]: int(line.split()[0]) for line in lines[2:7]}
-    assert said == {"out": 1, "in": 2, "converter-interfaced": 1, "not": 1, "second": 1}
+    assert lines[-1].startswith("3 pass (33.3 %), 3 data problem, 3 not supported, 0 fail, of 9")
+    assert lines[1].split()[:2] == ["9", "checked"] and "2 machine model unknown" not in lines[1]
+    assert "5 synchronous, 2 inverter-based, 1 machine model unknown, 1 no machine record" in lines[1]
+    said = {line.split()[1]: int(line.split()[0]) for line in lines[2:6]}
+    assert said == {"out": 1, "in": 2, "not": 1, "second": 1}
+    assert any(line.split()[:5] == ["REGCA1", "REECA1", "REPCA1", "1", "1"] for line in lines)
+    assert any(line.strip().startswith("13_2") and "WT4G1" in line and "not supported" in line
+               for line in lines)
     assert any("in service without dynamic records" in line and line.endswith(": 4 '1', 12 '1'")
                for line in lines)
     assert any("not generators" in line and "5 '1' CSVGN1" in line for line in lines)
@@ -316,3 +348,36 @@ def test_no_lapack_call_in_the_check_programs():
     for text in (whole, stiff):
         for call in ("lapack", "getrf", "geev", "gesdd", "trsm"):
             assert call not in text.lower(), call
+
+
+def test_an_open_or_slow_loop_of_a_plant_is_said_not_failed(tmp_path):
+    """The judgement of a plant's steps (host side, on made-up runs): REECA1 QFLAG = 1 with
+    VFLAG = 1 leaves its voltage loop open under an imposed voltage: the voltage step is not
+    judged, and a note says why; a step still moving at the end whose modes there all decay is a
+    note with its time constant; one with a growing mode fails."""
+    import numpy as np
+
+    from jaxdse._app import check_ibr
+    from jaxdse._app.check import SPEC
+    from jaxdse._io.psse import read_dyr, read_raw
+
+    dyr = (BENCH / "ieee14.dyr").read_text()
+    extra = EXTRA_RECORDS.split("9 'REPCA1'")[0].split("9 'REGCA1'")[1]
+    (tmp_path / "c.dyr").write_text(dyr + "9 'REGCA1'" + extra.replace("'1' 0 0 1 0 0 0", "'1' 0 0 1 1 0 0"))
+    (tmp_path / "c.raw").write_text(_more((BENCH / "ieee14.raw").read_text()))
+    raw, recs = read_raw(tmp_path / "c.raw"), read_dyr(tmp_path / "c.dyr")
+    g = raw.generator(9, "1")
+    st = check_ibr.ibr_static(raw, recs, g)
+    assert st.model.unit is not None and st.model.unit.electrical.qflag == 1 and st.model.unit.electrical.vflag == 1
+    n = int(round(SPEC.end_s * SPEC.frame_hz)) + 1
+    p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
+    flat = {"dy0": np.zeros(3), "p_t0": p0, "q_t0": q0, "p": np.full(n, p0), "q": np.full(n, q0), "ok": True,
+            "dy_end": np.zeros(3), "growth_end": -1.0}
+    swinging = {**flat, "q": q0 + 0.5 * np.sin(2.0 * np.arange(n) / SPEC.frame_hz), "growth_end": 0.0}
+    slow = {**flat, "p": p0 - 0.03 * (1 - np.exp(-np.arange(n) / SPEC.frame_hz / 20.0)), "growth_end": -0.05}
+    outcome, reasons, _, notes = check_ibr.judge(st, g, flat, (swinging, slow), SPEC)
+    assert outcome == "pass", reasons
+    assert notes[0] == check_ibr.OPEN_LOOP_NOTE
+    assert "still settling" in notes[1] and "time constant of 20 s" in notes[1]
+    outcome, reasons, _, _ = check_ibr.judge(st, g, flat, (swinging, {**slow, "growth_end": 0.3}), SPEC)
+    assert outcome == "fail" and "frequency step: not settled" in reasons[0] and "grows at 0.3" in reasons[0]

@@ -161,13 +161,13 @@ def test_damping_is_named_for_what_it_is(ieee14):
 
 def test_fleet_accounts_for_every_generator_record(tmp_path):
     """The fleet's account of the case (no estimation: the fleet file loaded): a unit recorded
-    but skipped, one not recorded, an unknown machine model on a plant's bus, a converter, an
-    out-of-service unit, an orphaned record; they add up to the .raw's generator records."""
+    but skipped, one not recorded, an unknown machine model on a plant's bus, an inverter-based
+    plant not recorded, an out-of-service unit, an orphaned record; they add up to the .raw's generator records."""
     from jaxdse._app.fleet import fleet_accounting
 
     gen = "{bus}, '{id}', 10, 0, 10, -10, 1.0, 0, 100, 0, 0.3, 0, 0, 1, {stat}, 100, 50, 0, 1, 1\n"
     extra = {(3, "2", 1): "GENROU, H < 0: skipped", (4, "1", 1): "GENROU: not recorded",
-             (1, "2", 1): "GENSAX: unknown, on plant B1_G1's bus", (9, "1", 1): "REGCA1: converter",
+             (1, "2", 1): "GENSAX: unknown, on plant B1_G1's bus", (9, "1", 1): "REGCA1: inverter-based, not recorded",
              (12, "1", 0): "out of service"}
 
     def raw(text):
@@ -192,11 +192,11 @@ def test_fleet_accounts_for_every_generator_record(tmp_path):
     acc = fleet_accounting(fl, list(fl.skipped))
     a = acc["summary"]
     assert a["generator_records"] == 10 and a["in_fleet"] == 5
-    assert (a["skipped"], a["not recorded"], a["on a plant's bus"], a["converter"], a["out of service"]) \
-        == (1, 1, 1, 1, 1)
+    assert (a["skipped"], a["not recorded"], a["on a plant's bus"], a["out of service"]) == (1, 2, 1, 1)
     rows = {(r["bus"], r["id"]): r for r in acc["generators_not_in_fleet"]}
     assert rows[(3, "2")]["category"] == "skipped" and "H = -5 must be > 0" in rows[(3, "2")]["why"]
     assert rows[(4, "1")]["category"] == "not recorded"
+    assert rows[(9, "1")]["category"] == "not recorded" and "inverter-based plant" in rows[(9, "1")]["why"]
     assert rows[(1, "2")]["plant"] == "B1_G1" and "GENSAX" in rows[(1, "2")]["why"]
     assert [(r["bus"], r["category"]) for r in acc["dyr_records_not_used"]] == [(99, "orphaned")]
 

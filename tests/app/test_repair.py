@@ -3,15 +3,17 @@
 The case is ``test_check.py``'s (five ieee14 units, three records made bad), so the check's
 compiled program is shared (one xdist work unit, ``tests/conftest.py``): bus 6's TGOV1 VMAX 0.25
 lies below its initial valve position 0.3 (a crossed limit: repaired), bus 3's ESST3A has VIMAX
-below VIMIN (values the model refuses: not repaired), bus 2's exciter is not simulated. The
-repaired case is checked again (bus 6 passes, its change listed) and read by the fleet loader.
+below VIMIN (values the model refuses: not repaired), bus 2's exciter is not simulated. Here bus
+8's MBASE is also cut from 100 to 20 MVA in the .raw (PT = 50 MW, PG = 35 MW: ACTIVSg2000's hydro
+units' mistake), which runs its TGOV1 past VMAX too: the repair is MBASE in a repaired.raw, and
+the unit, checked again at the new base, needs no governor change. The repaired case is checked
+again (buses 6 and 8 pass, their changes listed) and read by the fleet loader.
 The rule's arithmetic, the reader's comment lines and the in-place edit of a multi-line,
 comma-separated record are tested apart, without a simulation.
 """
 
 import csv
 import json
-import shutil
 from pathlib import Path
 
 import pytest
@@ -19,10 +21,24 @@ import pytest
 import jaxdse as jd
 from jaxdse._app.cli import main
 from jaxdse._app.fleet_file import load_fleet
-from jaxdse._dyr.repair import DIGITS, MARGIN, Change, Plan, _moved, _outward, plan, repaired_dyr
+from jaxdse._dyr.repair import (
+    DIGITS,
+    MARGIN,
+    Change,
+    Plan,
+    _moved,
+    _outward,
+    carried_raw_lines,
+    plan,
+    repaired_dyr,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
+
+
+GEN8 = "8, '1', 35, 7.39639154, 10, -6, 1.03, 0, 100,"
+"""Bus 8's generator record up to MBASE (line 38 of ieee14.raw)."""
 
 
 def _bad(text: str) -> str:
@@ -37,7 +53,9 @@ def _bad(text: str) -> str:
 @pytest.fixture(scope="module")
 def repaired(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("repair")
-    shutil.copy(BENCH / "ieee14.raw", tmp / "case.raw")
+    raw = (BENCH / "ieee14.raw").read_text()
+    assert raw.count(GEN8) == 1
+    (tmp / "case.raw").write_text(raw.replace(GEN8, GEN8.replace(", 100,", ", 20,")))
     (tmp / "case.dyr").write_text(_bad((BENCH / "ieee14.dyr").read_text()))
     (tmp / "case.toml").write_text('[case]\nraw = "case.raw"\ndyr = "case.dyr"\n'
                                    '[playback]\nke_zero = "literal"\n')
@@ -51,8 +69,9 @@ def test_the_change_table(repaired):
 
     doc = json.loads((repaired / "out" / "check.json").read_text())
     r = doc["repair"]
-    assert r["units"] == 1 and len(r["changes"]) == 1
-    c = r["changes"][0]
+    assert r["units"] == 2 and len(r["changes"]) == 2
+    assert r["checked_again_at_new_mbase"] == ["8_1"]
+    base, c = r["changes"]
     assert (c["unit"], c["record"], c["file"], c["line"], c["con"], c["con_number"]) == \
         ("6_1", "TGOV1", "case.dyr", 28, "VMAX", 3)
     assert (c["old"], c["new"], c["bound"], c["side"]) == (0.25, 0.315, 0.25, "above")
@@ -61,9 +80,25 @@ def test_the_change_table(repaired):
     # the inverted limit is not a crossed limit: left, and said so; the unsupported model is no data problem
     assert [x["unit"] for x in r["not_repaired"]] == ["3_1"]
     assert "not a crossed limit" in r["not_repaired"][0]["why"] and "VIMAX" in r["not_repaired"][0]["why"]
+    # bus 8: MBASE below its own PT and power flow; MBASE moved, its governor left alone
+    assert (base["unit"], base["record"], base["file"], base["line"], base["con"], base["con_number"]) == \
+        ("8_1", "generator", "case.raw", 38, "MBASE", 9)
+    s0 = (35**2 + 7.39639154**2) ** 0.5
+    assert (base["old"], base["new"], base["bound"]) == (20.0, 37.57, 20.0)
+    assert base["value"] == pytest.approx(s0)
+    assert base["new"] >= s0 * (1 + MARGIN) > base["new"] - 0.01
+    assert base["why"].startswith("|S0| = |PG + jQG| = 35.77 above MBASE = 20 (PG = 35 MW, QG = 7.396 Mvar: "
+                                  "1.79 x MBASE, flagged above 1.1 x); MBASE at least 37.56 puts it 5 % "
+                                  "inside; "
+                                  "its PT = 50 MW is 2.5 x MBASE; the case's other in-service generators "
+                                  "have MBASE = 2 x PT (median)")
+    (e8,) = [e for e in doc["units"] if e["name"] == "8_1"]
+    assert e8["outcome"] == "data problem" and e8["reasons"][0].startswith(
+        "generator on bus 8 id '1' (case.raw line 38): |S0| = |PG + jQG| = 35.77 above MBASE = 20")
+    assert [lim["record"] for lim in e8["limits"]] == ["generator", "TGOV1"]
     rows = list(csv.DictReader((repaired / "out" / "repairs.csv").open()))
-    assert len(rows) == 1 and rows[0]["con"] == "VMAX" and float(rows[0]["new"]) == 0.315
-    assert rows[0]["line"] == "28" and rows[0]["unit"] == "6_1"
+    assert [x["con"] for x in rows] == ["MBASE", "VMAX"] and float(rows[1]["new"]) == 0.315
+    assert rows[1]["line"] == "28" and rows[1]["unit"] == "6_1" and rows[0]["record"] == "generator"
     lines = console_table(doc).splitlines()
     assert any(line.split() == ["6_1", "TGOV1", "case.dyr:28", "VMAX", "0.25", "0.315", *c["why"].split()]
                for line in lines)
@@ -91,18 +126,41 @@ def test_repaired_dyr_changes_one_token_and_reads_back(repaired):
     assert all(not r.changes for r in dyr.records if r is not gov)
     text = (repaired / "out" / "repaired.toml").read_text()
     assert 'dyr = "repaired.dyr"' in text and 'ke_zero = "literal"' in text
+    assert 'raw = "repaired.raw"' in text
+
+
+def test_repaired_raw_changes_one_field_and_reads_back(repaired):
+    old = (repaired / "case.raw").read_text().splitlines()
+    new = (repaired / "out" / "repaired.raw").read_text().splitlines()
+    assert len(new) == len(old)
+    ((a, b),) = [(a, b) for a, b in zip(old, new) if a != b]
+    assert a.startswith(GEN8.replace(", 100,", ", 20,"))
+    assert b.startswith(GEN8.replace(", 100,", ", 37.57,"))
+    assert b.split(" / ")[0] == a.replace(", 20,", ", 37.57,", 1)
+    raw = jd.read_raw(repaired / "out" / "repaired.raw")       # strict: a valid .raw
+    g = raw.generator(8, "1")
+    assert g.mbase_mva == 37.57 and g.pg_mw == 35.0 and g.pt_mw == 50.0
+    (c,) = g.changes
+    assert (c.con, c.old, c.new, c.origin) == ("MBASE", 20.0, 37.57, "case.raw line 38")
+    assert all(not x.changes for x in raw.generators if x is not g)
+    (line,) = carried_raw_lines(g)
+    assert line.startswith("generator on bus 8 id '1' (.raw): MBASE 20 -> 37.57 by jaxdse check --repair "
+                           "(was case.raw line 38): |S0| = |PG + jQG| = 35.77 above MBASE = 20")
 
 
 def test_the_repaired_case_passes_and_lists_its_change(repaired):
     doc = json.loads((repaired / "again" / "check.json").read_text())
     units = {e["name"]: e for e in doc["units"]}
-    assert units["6_1"]["outcome"] == "pass"
+    assert units["6_1"]["outcome"] == "pass" and units["8_1"]["outcome"] == "pass"
     (c,) = units["6_1"]["repairs"]
     assert (c["record"], c["con"], c["old"], c["new"], c["holds_new"]) == ("TGOV1", "VMAX", 0.25, 0.315, True)
-    assert all(not e["repairs"] for n, e in units.items() if n != "6_1")
+    (c,) = units["8_1"]["repairs"]
+    assert (c["record"], c["con"], c["old"], c["new"], c["holds_new"]) == \
+        ("generator", "MBASE", 20.0, 37.57, True)
+    assert all(not e["repairs"] for n, e in units.items() if n not in ("6_1", "8_1"))
     s = doc["summary"]
     assert (s["pass"], s["data problem"], s["not supported"], s["fail"]) == (3, 1, 1, 0)
-    assert doc["repaired_units"] == 1
+    assert doc["repaired_units"] == 2
     assert "Repaired records" in (repaired / "again" / "check.html").read_text()
 
 

@@ -265,3 +265,39 @@ def test_criteria_are_plain_fields_a_toml_table_can_fill():
     with pytest.raises(dataclasses.FrozenInstanceError):
         c.pre_s = 1.0
 
+
+
+def test_a_channel_left_out_of_judged_is_scored_not_judged():
+    """The .dyr playback is judged on P and Q (``fleet.DYR_JUDGED``): a speed channel that the
+    replay does not follow (here five times the measured swing) is scored and reported, and fails
+    the playback only where it is judged."""
+    meas, replay = measured(), response(0.10)
+    meas["x2"], replay["x2"] = 0.5 * (meas["P_t"] - 0.8), 2.5 * (replay["P_t"] - 0.8)
+    judged = window_scores(T, meas, replay, MBASE)
+    assert not judged.passed and all(r.startswith("x2:") for r in judged.reasons)
+    reported = window_scores(T, meas, replay, MBASE, judged=("P_t", "Q_t"))
+    assert reported.passed, reported.reasons
+    ev = reported.score("event", "x2")
+    assert ev.peak_deviation_simulated == pytest.approx(5 * ev.peak_deviation_measured, rel=0.1)
+    # P still judged: a replay off in P fails with x2 left out
+    off = {**replay, "P_t": response(0.10, scale=5.0)["P_t"]}
+    assert not window_scores(T, meas, off, MBASE, judged=("P_t", "Q_t")).passed
+
+
+def test_modes_are_not_compared_where_the_replay_differs_no_more_than_noise():
+    """ACTIVSg2000 B6145_G1's Q (its own records played back against a recording of them,
+    ``benchmarks/real_case_fleet.py``): 0.215 % of MBASE time-aligned error in the event window,
+    0.224 % before the event (the recorded voltage's noise driving the model); the fit finds
+    no mode in the 0.85 % oscillation of the recording and one in the replay. Within 3 sigma of
+    the noise the fits are not compared; a replay off by 5 sigma is."""
+    from jaxdse._app.windows import ChannelScore, Mode, _judge_modes
+
+    c = WindowCriteria()
+    nan = float("nan")
+    sc = ChannelScore("Q_t", "event", 301, 5.118, 5.133, 0.215, 0.215, 0.0, 0.846, 0.862,
+                      Mode(nan, nan, nan), Mode(1.905, 0.209, 5.298))
+    tol = c.min_deviation_percent_mbase
+    assert any("recording shows no oscillatory mode" in r for r in _judge_modes(sc, c, tol))
+    assert _judge_modes(sc, c, tol, noise=0.224) == []
+    off = dataclasses.replace(sc, rms_error=1.12, aligned_rms_error=1.12)
+    assert any("recording shows no oscillatory mode" in r for r in _judge_modes(off, c, tol, noise=0.224))

@@ -1,5 +1,6 @@
 """The spike screen (``_io/measurement.py``, step 5) on what a 30 frames/s PMU records of a
-plant in a disturbance: a fault's 2-frame voltage dip answered by the current, a line trip's
+plant in a disturbance: a fault's 2-frame voltage dip answered by the current (and a 3-frame dip
+whose current decays within it, answered at its first frame only), a line trip's
 steps, and a large electromechanical swing are kept whole; a glitch in one channel is masked;
 stale (repeated) frames in noisy data are masked, and a noise-free recording's repeats kept.
 Synthetic recordings written as CSV and read through ``jd.read_measurement``."""
@@ -36,16 +37,20 @@ def read(tmp_path, kind, glitch=None, seed=0, stale=(), noise=True):
         va = va + after * 2.0 * swing
         im = im + after * 0.3 * swing
         ia = ia + after * 4.0 * swing
-    if kind in ("fault", "trip"):
+    if kind in ("fault", "fault3", "trip"):
         vm = vm - 0.012 * after
         va = va + after * (3.3 + 2.0 * swing)
         im = im + after * (0.3 * swing - 0.15 * np.exp(-3 * x))
-        ia = ia + after * (3.0 + 4.0 * swing)
+        ia = ia + after * ((1.0 if kind == "fault3" else 3.0) + 4.0 * swing)
     if kind == "fault":                                           # 2 frames at 50 %, then the trip
         during = (T >= EVENT - 2 / FPS) & (T < EVENT)
         vm = np.where(during, 0.5, vm)
         im = np.where(during, 2.5, im)
         ia = np.where(during, -70.0, ia)
+    if kind == "fault3":                                          # 3 frames at 30 %, the current decays
+        during = (T >= EVENT - 3 / FPS) & (T < EVENT)
+        vm = np.where(during, 0.3, vm)
+        im[during] = [2.0, 1.4, 1.1]                               # its angle unchanged
     if glitch is not None:
         column, at, factor = glitch
         {"vm": vm, "im": im}[column][int(at * FPS)] *= factor
@@ -66,7 +71,7 @@ def read(tmp_path, kind, glitch=None, seed=0, stale=(), noise=True):
     return jd.read_measurement(spec)
 
 
-@pytest.mark.parametrize("kind", ["swing", "trip", "fault"])
+@pytest.mark.parametrize("kind", ["swing", "trip", "fault", "fault3"])
 def test_an_event_is_kept_whole(tmp_path, kind):
     assert recording(tmp_path, kind)["masked_samples"] == 0
 

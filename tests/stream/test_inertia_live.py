@@ -77,9 +77,10 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
             f'fleet = "{run_config}"\nwindow_s = 10.0\ntile = 2\n'
             "[inertia]\nlargest_loss_mw = 1000.0\nstale_s = 5.0\nupdate_s = 2.0\nfloor_MWs = 20000.0\n"
             f'[[stream]]\nhost = "{host}"\nport = {port}\nunits = ["unit1"]\n'
-            f'[[stream]]\nhost = "{host}"\nport = {port}\nunits = ["unit1~2"]\n')
+            f'[[stream]]\nhost = "{host}"\nport = {port}\nunits = ["unit1~2"]\n[view]\nport = 0\n')
         log = []
-        summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=log.append).run(6.5)
+        mon = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=log.append)
+        summary = mon.run(6.5)
     lines = [json.loads(x) for x in (tmp_path / "o" / "updates.jsonl").read_text().splitlines()]
     system = [x for x in lines if x.get("area") == "system"]
     area = [x for x in lines if x.get("area") == "monitored units"]
@@ -100,8 +101,18 @@ def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tm
         assert x["E_ci95"][0] <= truth <= x["E_ci95"][1]
         assert x["rocof_hz_per_s"] == pytest.approx(50 * 1000 / 2 / x["E_MWs"])
     assert summary["inertia"][-1]["area"] == "system" and summary["inertia"][-1]["below_floor"] is True
+    # lines emitted once the stream's time passes theirs (stream seconds: at 20x the compile's
+    # wall seconds are hundreds of them here, as for the units' delay_s)
+    d = summary["inertia_delay_s"]
+    assert 0 <= d["median"] <= d["p99"] <= d["max"], d
     alarms = [x for x in log if x.startswith("ALARM inertia")]          # once per area, not every line
     assert len(alarms) == 2 and "below the floor 20 GW s" in alarms[-1] and "system" in alarms[-1]
+    # the live page's panel holds the same lines, the floor and the alarm state
+    panel = mon.view.state()["inertia"]
+    assert panel["floor_MWs"] == 20000.0 and [a["area"] for a in panel["areas"]] == ["monitored units", "system"]
+    view_system = panel["areas"][1]
+    assert [p["E"] for p in view_system["history"]] == [x["E_MWs"] for x in system]
+    assert view_system["latest"]["below_floor"] is True
 
 
 def test_tracker_of_a_fleet_file_takes_the_case():

@@ -1,4 +1,5 @@
-"""``jaxdse check CASE.toml``: the no-disturbance check of every synchronous unit of a PSS/E case.
+"""``jaxdse check CASE.toml``: the no-disturbance check of every unit of a PSS/E case (synchronous
+machines here; inverter-based plants in :mod:`jaxdse._app.check_ibr`).
 
 Every in-service generator of the .raw with a machine record in the .dyr (a synchronous unit)
 gets its own :class:`~jaxdse._dyr.unit.DyrUnit` from its records (machine, exciter, stabiliser,
@@ -42,7 +43,7 @@ Every generator record of the .raw is accounted for (:func:`accounting`, from
 :func:`~jaxdse._dyr.inventory.inventory`): the units (a machine record; records of a model
 jaxdse does not know, ``not supported`` naming it; exciter, stabiliser or governor records
 without a machine record, a ``data problem``) and, each with its reason, those not checked
-(out of service, no dynamic records, converter-interfaced, not a generator: SVC/STATCOM,
+(out of service, no dynamic records, not a generator: SVC/STATCOM,
 duplicated); the .dyr records of no generator are listed (orphaned, bus level).
 
 Outcome per unit: ``"pass"``; ``"data problem"`` (a record jaxdse simulates but whose values
@@ -69,7 +70,7 @@ import json
 import math
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from pathlib import Path
 from typing import NamedTuple
 
@@ -79,8 +80,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._dyr.ibr_unit import IbrUnit
 from .._dyr.inventory import GENERATOR_CATEGORIES, Inventory, inventory
-from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings
+from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings, rating_crossings
 from .._dyr.records import UnitModel, record_kind, unit_model
 from .._dyr.stiff import EXPLICIT_LIMIT, kvaerno5, modes, stiff_note, too_stiff
 from .._dyr.unit import DyrUnit, UnitInputs
@@ -106,6 +108,7 @@ from .._models.governors import GOVERNORS
 from .._models.machines import MACHINES
 from .._models.stabilisers import STABILISERS
 from .._version import __version__
+from . import check_ibr
 from .dyr_fleet import PlaybackOptions
 from .fleet_file import TOP
 from .progress import Progress
@@ -494,6 +497,13 @@ def _judge(st: _Static, g: RawGenerator, raw: RawCase, held: dict, step: dict, s
     where = (f"PG = {g.pg_mw:g} MW, QG = {g.qg_mvar:g} Mvar on MBASE = {g.mbase_mva:g} MVA, "
              f"VT = {start.vt:.4g} pu")
     data, limits = [], []
+    for c in rating_crossings(g.pg_mw, g.qg_mvar, g.mbase_mva):
+        data.append(f"generator on bus {g.bus} id {g.id.strip()!r} ({Path(raw.source).name} line {g.line}): "
+                    f"{describe(c)}: the power flow lies outside the capability of MBASE, the rating its "
+                    "dynamic records are per unit of")
+        limits.append({"record": "generator", "file": Path(raw.source).name, "line": g.line,
+                       "signal": c.signal, "value": c.value, "con": c.con, "bound": c.bound,
+                       "side": c.side, "context": c.context, "fix": c.fix._asdict()})
     if unit.exciter is not None:
         for c in exciter_crossings(models["exciter"], unit.exciter, y_e, start):
             data.append(f"{record_label(recs['exciter'])}: {describe(c)}: the initial field voltage "
@@ -602,21 +612,26 @@ def _unit_name(g: RawGenerator) -> str:
 
 
 def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec = SPEC,
-               progress: Callable[[str], None] | bool = True, workers: int | None = None) -> dict:
-    """The check of every synchronous unit of ``case``: the check.json document (``units``,
-    ``summary``, the runs' definition, timings)."""
+               progress: Callable[[str], None] | bool = True, workers: int | None = None,
+               only: Collection[str] | None = None) -> dict:
+    """The check of every unit of ``case``: the check.json document (``units``, ``summary``,
+    the runs' definition, timings); ``only``: just the units of these names ("BUS_ID", as
+    check.json names them; ``--repair`` checks again the units whose MBASE it changed)."""
     t_start = time.perf_counter()
     raw, dyr = case.raw, case.dyr
     inv = inventory(raw, dyr)
     accounts = inv.units(out_of_service=out_of_service)
+    if only is not None:
+        accounts = [a for a in accounts if _unit_name(a.generator) in set(only)]
     gens = [a.generator for a in accounts]
     off = inv.summary()["out_of_service_with_machine_record"]
-    if not any(a.has_machine or a.category == "machine model unknown" for a in accounts):
+    if not any(a.has_machine or a.category in ("machine model unknown", "inverter-based") for a in accounts):
         counts = ", ".join(f"{n} {k}" for k, n in inv.counts().items() if n)
-        raise InputError(case.path, "no synchronous unit: no in-service generator of "
-                         f"{Path(raw.source).name} has a machine record in the .dyr (its "
-                         f"{len(raw.generators)} generator record(s): {counts})")
-    statics = [_static(raw, dyr, g, case.playback.ke_zero) for g in gens]
+        raise InputError(case.path, "no unit to check: no in-service generator of "
+                         f"{Path(raw.source).name} has a machine or inverter-based plant record in the "
+                         f".dyr (its {len(raw.generators)} generator record(s): {counts})")
+    statics = [check_ibr.ibr_static(raw, dyr, g) if a.category == "inverter-based"
+               else _static(raw, dyr, g, case.playback.ke_zero) for g, a in zip(gens, accounts)]
     entries = []
     groups: dict = {}
     for g, st, acc in zip(gens, statics, accounts):
@@ -647,20 +662,31 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
     """unit index -> (held lane, step lane, the _Run it was integrated with)"""
     times: list = []
 
-    def one_group(members: list[int], how: _Run) -> tuple[_Result, float]:
+    def one_group(members: list[int], how: _Run) -> tuple[list, float]:
+        """Per member: (held run, step run(s)) as host dicts; and the wall time."""
         t0 = time.perf_counter()
         units = [statics[k].model.unit for k in members]
-        lanes = [_lane(raw, gens[k], x) for x in (0.0, spec.step) for k in members]
-        args = (_stack(units + units), _stack(lanes), how)
-        compiled = _batch_jit().lower(*args).compile()
+        n = len(members)
+        if isinstance(units[0], IbrUnit):   # held, voltage step, frequency step
+            per = [check_ibr.lanes(raw, gens[k], spec.step) for k in members]
+            lanes = [p[j] for j in range(3) for p in per]
+            fn, split = check_ibr.batch_jit(), (lambda r, j: (check_ibr.at(r, j), (
+                check_ibr.at(r, n + j), check_ibr.at(r, 2 * n + j))))
+        else:
+            lanes = [_lane(raw, gens[k], x) for x in (0.0, spec.step) for k in members]
+            fn, split = _batch_jit(), (lambda r, j: (_at(r, j), _at(r, n + j)))
+        args = (_stack(units * (len(lanes) // n)), _stack(lanes), how)
+        compiled = fn.lower(*args).compile()
         executing()   # the group's run limit counts from here
-        return jax.device_get(compiled(*args)), time.perf_counter() - t0
+        res = jax.device_get(compiled(*args))
+        return [split(res, j) for j in range(n)], time.perf_counter() - t0
 
     def execute(batches: list[tuple[list[int], _Run]]) -> None:
         # one compiled call per model structure and solver, side by side on the cores; every
         # wait bounded (a limit from the group's work), an expired group's units marked
         tasks = [Task(f"group {_chain(entries[m[0]])} ({len(m)} unit(s), {how.solver})",
-                      wait_limit_s(len(m), spec, how.solver, how.substeps),
+                      wait_limit_s(len(m) * (3 if isinstance(statics[m[0]].model.unit, IbrUnit) else 2) // 2,
+                                   spec, how.solver, how.substeps),
                       lambda m=m, how=how: one_group(m, how), COMPILE_LIMIT_S) for m, how in batches]
         for i, value in bounded(tasks, n_workers, threads=in_threads):
             members, how = batches[i]
@@ -671,10 +697,10 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                     done.pop(k, None)
                 report(f"{tasks[i].label}: {value.reason}")
                 continue
-            res, dt = value
+            runs, dt = value
             times.append(dt)
-            for j, k in enumerate(members):
-                done[k] = (_at(res, j), _at(res, len(members) + j), how)
+            for k, (held, step) in zip(members, runs):
+                done[k] = (held, step, how)
             report(f"{_chain(entries[members[0]])}: {len(members)} unit(s), {how.solver}, {dt:.1f} s")
 
     execute([(m, run) for m in order])
@@ -696,6 +722,11 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                 entries[k]["solver"] = "kvaerno5"
         execute([(m, implicit) for m in sorted(stiff.values(), key=len, reverse=True)])
     for k, (held, step, how) in done.items():
+        if isinstance(statics[k].model.unit, IbrUnit):
+            outcome, reasons, numbers, notes = check_ibr.judge(statics[k], gens[k], held, step, spec)
+            entries[k].update(outcome=outcome, reasons=reasons, numbers=numbers)
+            entries[k]["notes"] += notes
+            continue
         outcome, reasons, numbers, limits = _judge(
             statics[k], gens[k], raw, held, step, spec, (how.solver, 1.0 / (how.frame_hz * how.substeps)))
         if outcome == "fail" and statics[k].warnings:
@@ -714,7 +745,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                   "step_s": 1.0 / (spec.frame_hz * case.playback.substeps),
                   "ke_zero": case.playback.ke_zero},
         "summary": {**_summary(entries, off if not out_of_service else 0, len(order) + len(stiff)),
-                    "accounting": accounting(inv, entries)},
+                    "accounting": accounting(inv, entries) if only is None else None},
         "units": entries,
         "not_checked": [a.as_dict() for a in inv.generators if id(a) not in checked],
         "dyr_records_not_used": [r.as_dict() for r in inv.records],
@@ -723,14 +754,13 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         "group_times_s": times,
     }
     _finite(doc)
-    attach_carried(doc, dyr)
+    attach_carried(doc, dyr, raw)
     return doc
 
 
 NOT_CHECKED = {"out of service": "out of service, not checked",
                "no dynamic records": "in service without dynamic records (no .dyr record on their bus "
                                      "and ID)",
-               "converter": "converter-interfaced sources (not synchronous machines)",
                "not a generator": "not generators: static var compensators or STATCOMs in the generator data",
                "duplicate": "second generator records for the same bus and ID (the first is used)"}
 """The categories of generator records that are not units of the check, in words."""
@@ -807,7 +837,8 @@ def wait_limit_s(units: int, spec: CheckSpec, solver: str, substeps: int) -> flo
 
 
 def _chain(e: dict) -> str:
-    return " ".join(e["models"][k] or "-" for k in KINDS)
+    kinds = check_ibr.IBR_KINDS if e.get("category") == "inverter-based" else KINDS
+    return " ".join(e["models"].get(k) or "-" for k in kinds)
 
 
 def _summary(entries: list[dict], off: int, programs: int) -> dict:
@@ -882,7 +913,9 @@ def check_page(doc: dict) -> str:
         reasons = "<br>".join(html.escape(r) for r in e["reasons"]) or "–"
         rows.append(f"<tr><td>{html.escape(e['name'])}</td><td>{e['bus']}</td><td>{html.escape(e['id'])}</td>"
                     f"<td>{e['mbase_mva']:.0f}</td><td>{e['pg_mw']:.1f}</td>"
-                    + "".join(f"<td>{html.escape(m[k] or '–')}</td>" for k in KINDS)
+                    + "".join(f"<td>{html.escape(m.get(k) or '–')}</td>"
+                              for k in (check_ibr.IBR_KINDS + ("",) if e.get("category") == "inverter-based"
+                                        else KINDS))
                     + f"<td data-sort=\"{OUTCOMES.index(e['outcome'])}\">{_badge(e['outcome'])}</td>"
                     f"<td style=\"text-align:left\" class=\"small\">{reasons}</td></tr>")
     chains = "".join(
@@ -894,7 +927,8 @@ def check_page(doc: dict) -> str:
                           for k, n in s["not_supported_models"].items()) or "<li>none</li>"
     counts = ", ".join(f"{_badge(o)} {s[o]}" for o in OUTCOMES)
     body = f"""
-<h1>Case check: every synchronous unit at rest and after a voltage step</h1>
+<h1>Case check: every unit at rest and after a voltage step (and a frequency step for
+inverter-based plants)</h1>
 <p class="small">{html.escape(doc['source'])} · jaxdse {html.escape(doc['jaxdse_version'])} ·
 case {html.escape(Path(doc['case']['raw']).name)} (rev {doc['case']['raw_revision']}) and
 {html.escape(Path(doc['case']['dyr']).name)} · {doc['wall_time_s']:.0f} s</p>
@@ -923,12 +957,14 @@ its model's checks refuse):</p><ul>{reasons}</ul>
 <p>Models not simulated:</p><ul>{unsupported}</ul>
 {repair_html(doc)}
 <h2>Model chains</h2>
-<table class="sortable"><thead><tr><th>machine exciter stabiliser governor</th><th>units</th>
+<table class="sortable"><thead><tr><th>machine exciter stabiliser governor, or converter,
+electrical controls, plant controller</th><th>units</th>
 {''.join(f'<th>{o}</th>' for o in OUTCOMES)}</tr></thead><tbody>{chains}</tbody></table>
 <h2>All units</h2>
 <p class="small">Click a column heading to sort.</p>
 <table class="sortable"><thead><tr><th>unit</th><th>bus</th><th>id</th><th>MBASE [MVA]</th>
-<th>PG [MW]</th><th>machine</th><th>exciter</th><th>stabiliser</th><th>governor</th><th>outcome</th>
+<th>PG [MW]</th><th>machine / converter</th><th>exciter / electrical controls</th>
+<th>stabiliser / plant controller</th><th>governor</th><th>outcome</th>
 <th>reasons</th></tr></thead><tbody>
 {''.join(rows)}
 </tbody></table>
@@ -980,14 +1016,22 @@ def run_check(path, out: Path | None = None, *, out_of_service: bool = False, re
     case = load_case(path)
     doc = check_case(case, out_of_service=out_of_service)
     if repair:
-        doc["repair"] = write_repair(case, doc, Path(out) if out is not None else Path(path).parent)
+        def recheck(again: CaseFile, names) -> dict:
+            # the units of their model chains: the groups of the first run, so its compiled programs
+            chains = {_chain(e) for e in doc["units"] if e["name"] in set(names)}
+            return check_case(again, out_of_service=out_of_service,
+                              only=[e["name"] for e in doc["units"] if _chain(e) in chains])
+
+        doc["repair"] = write_repair(case, doc, Path(out) if out is not None else Path(path).parent,
+                                     recheck=recheck)
     print(console_table(doc))
     if out is not None:
         write_check(out, doc)
         print(f"wrote {Path(out) / 'check.json'} and {Path(out) / 'check.html'}")
     if repair:
         files = doc["repair"]["files"]
-        print(f"wrote {files['dyr']}, {files['csv']} and {files['case']}; check the repaired case: "
+        print(f"wrote {files['dyr']}, " + (f"{files['raw']}, " if "raw" in files else "")
+              + f"{files['csv']} and {files['case']}; check the repaired case: "
               f"jaxdse check {files['case']}")
     return doc
 

@@ -422,8 +422,9 @@ examples:
 
 
 CHECK_HELP = """\
-The first thing to run on a PSS/E dynamic case: does every synchronous unit start at rest and
-settle after a small disturbance, with the records as they are? No recordings needed.
+The first thing to run on a PSS/E dynamic case: does every unit (synchronous machines and
+inverter-based plants) start at rest and settle after a small disturbance, with the records as
+they are? No recordings needed.
 
 Every in-service generator with a machine record in the .dyr (a synchronous unit) gets its own
 model from its records (machine, exciter, stabiliser, governor: the models listed below),
@@ -453,10 +454,18 @@ Outcome per unit:
                   (the reasons give the numbers)
 Units of one model structure run in one compiled, vmapped call.
 
+Inverter-based plants (REGCA1 + REECA1, optional REPCA1) get the held run, the 2 % voltage step
+(REECA1 Vref0/Vref1 and REPCA1 Vref moved with it) and a 0.1 Hz frequency step (the plant
+controller's droop); data problem where the power flow crosses PMAX/PMIN, QMAX/QMIN or IMAX.
+A step still settling at 21 s with every mode decaying is a note (its time constant), and so is
+the voltage step of REECA1 QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
+network: open with the voltage imposed). Other converter models (WT4G1, type-3 wind, REECB1,
+...) are units, not supported, named.
+
 Every generator record of the .raw is accounted for (the counts add up to the .raw's): the
-units checked (an unknown machine model, e.g. a renamed GENSAL, is a unit, not supported,
+units checked (machines and inverter-based plants; an unknown machine model, e.g. a renamed GENSAL, is a unit, not supported,
 named; exciter or governor records without a machine record, a data problem); out of service;
-in service without dynamic records; converter-interfaced (REGCA1, WT4G1, ...); not generators
+in service without dynamic records; not generators
 (SVC, STATCOM: CSVGN1, CSTATT, SVSMO1, ...); second records of one generator. .dyr records of
 no generator are listed: orphaned (bus or ID not in the .raw: record, line) or of a bus (USRBUS).
 
@@ -710,7 +719,7 @@ def build_parser() -> argparse.ArgumentParser:
     va.add_argument("config", metavar="CONFIG.toml", help="fleet file with [calibrate]")
     va.add_argument("--out", metavar="DIR", required=True, help="output folder")
     va.set_defaults(func=_validate)
-    ch = sub.add_parser("check", help="no-disturbance check of every synchronous unit of a PSS/E case",
+    ch = sub.add_parser("check", help="no-disturbance check of every unit of a PSS/E case",
                         description=CHECK_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     ch.add_argument("case", metavar="CASE.toml", help="a file with [case] raw, dyr (a fleet file serves)")
     ch.add_argument("--out", metavar="DIR", default=None, help="write DIR/check.json and DIR/check.html")

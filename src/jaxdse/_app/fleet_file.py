@@ -23,7 +23,7 @@ from .._core.drem import ObserverConfig
 from .._core.identify import IdentifySettings
 from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
-from .._dyr.repair import carried_lines
+from .._dyr.repair import carried_lines, carried_raw_lines
 from .._io.config import GeneratorRun
 from .._io.errors import InputError
 from .._io.inertia import InertiaConfig, inertia_section
@@ -210,8 +210,10 @@ def load_fleet(path) -> Fleet:
         built.append(FleetPlant(name, bus, tuple(units.members), tuple(units.others), run,
                                 fallbacks=tuple(_one_line(n) for n in (*units.notes, *notes)),
                                 data_warnings=tuple(_one_line(n) for n in units.data_warnings),
-                                repairs=tuple(carried_lines(r for m in units.members
-                                                            for r in dyr.unit_records(bus, m.id)))))
+                                repairs=tuple([*(line for m in units.members
+                                                 for line in carried_raw_lines(raw.generator(bus, m.id))),
+                                               *carried_lines(r for m in units.members
+                                                              for r in dyr.unit_records(bus, m.id))])))
     if not built:
         if skipped:
             first = skipped[0]

@@ -8,9 +8,14 @@ the rule, what is and is not repaired) and writes, into the output folder:
   files in [case] dyr, only the changed records, to be read after them;
 * ``repairs.csv`` -- one row per changed constant (unit, bus, id, record, file, line, CON, its
   number, old, new, the signal, its value, the limit, its value, the side, why);
-* ``repaired.toml`` -- a case file with the same .raw and the repaired .dyr (and the case's
-  [playback]), for ``jaxdse check``, ``jaxdse fleet`` and ``jaxdse validate`` (a fleet file
-  takes its [case] as it is).
+* ``repaired.raw`` -- only where a generator's .raw data (its power flow |PG + jQG| or its
+  maximum output PT) lie above 1.1 x its MBASE: the .raw with each such MBASE replaced in place
+  and a ``/ jaxdse repair: MBASE ...`` comment at the end of the record's line; those units are
+  then checked again on it (their exciter and governor limits at the new base), and only what
+  they still cross is repaired in the .dyr;
+* ``repaired.toml`` -- a case file with the .raw (repaired.raw where written) and the repaired
+  .dyr (and the case's [playback]), for ``jaxdse check``, ``jaxdse fleet`` and ``jaxdse
+  validate`` (a fleet file takes its [case] as it is).
 
 check.json gets the section ``repair`` (the rule, the files, ``changes``: the rows of
 repairs.csv, ``not_repaired``: {unit, why}); the console and check.html show the table.
@@ -22,34 +27,49 @@ unit pages of ``jaxdse fleet`` and ``jaxdse validate``.
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 
-from .._dyr.repair import RULE, carried, changes_csv, plan, repaired_dyr
+from .._dyr.repair import RULE, carried, carried_raw, changes_csv, plan, repaired_dyr, repaired_raw
+from .._io.psse import read_raw
 from .dyr_fleet import PlaybackOptions
 
 
-def write_repair(case, doc: dict, out_dir: Path) -> dict:
+def write_repair(case, doc: dict, out_dir: Path, recheck: Callable | None = None) -> dict:
     """Plan the repairs of ``doc`` (the check of ``case``), write the files into ``out_dir``;
-    the ``repair`` section of check.json."""
+    the ``repair`` section of check.json. ``recheck(case, names)``: the check.json document of
+    the units ``names`` of ``case`` (``check_case(case, only=names)``), run on the case with the
+    repaired .raw for the units whose MBASE changed."""
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     sources = case.dyr.source.split(" + ")
-    p = plan(doc, case.dyr, ke_zero=case.playback.ke_zero)
-    text, whole = repaired_dyr(p, sources)
+    p = plan(doc, case.dyr, ke_zero=case.playback.ke_zero, raw=case.raw)
     files = {"dyr": out_dir / "repaired.dyr", "csv": out_dir / "repairs.csv",
              "case": out_dir / "repaired.toml"}
+    raw_file = case.raw.source
+    rechecked = list(p.recheck) if recheck is not None else []
+    if p.raw_changes:
+        files["raw"] = raw_file = out_dir / "repaired.raw"
+        with open(raw_file, "w", encoding="latin-1", newline="") as f:
+            f.write(repaired_raw(p, case.raw.source))
+        if p.recheck and recheck is not None:
+            again = dataclasses.replace(case, raw=read_raw(raw_file, strict=False))
+            p = p.merged(plan(recheck(again, p.recheck), case.dyr, ke_zero=case.playback.ke_zero,
+                              raw=again.raw))
+    text, whole = repaired_dyr(p, sources)
     with open(files["dyr"], "w", encoding="latin-1", newline="") as f:
         f.write(text)
     files["csv"].write_text(changes_csv(p))
     dyrs = ["repaired.dyr"] if whole else [_rel(s, out_dir) for s in sources] + ["repaired.dyr"]
-    files["case"].write_text(_case_text(case, dyrs, out_dir))
+    files["case"].write_text(_case_text(case, dyrs, out_dir, raw_file))
     return {"rule": RULE, "whole_file": whole,
             "files": {k: str(v) for k, v in files.items()},
-            "units": len(p.units), "changes": [_finite(c.row()) for c in p.changes],
-            "not_repaired": list(p.not_repaired)}
+            "units": len(p.units), "changes": [_finite(c.row()) for c in (*p.raw_changes, *p.changes)],
+            "not_repaired": list(p.not_repaired), "checked_again_at_new_mbase": rechecked}
 
 
 def _rel(path, start: Path) -> str:
@@ -63,13 +83,15 @@ def _rel(path, start: Path) -> str:
     return str(a)
 
 
-def _case_text(case, dyrs: list[str], out_dir: Path) -> str:
+def _case_text(case, dyrs: list[str], out_dir: Path, raw_file) -> str:
     pb = case.playback
     default = PlaybackOptions()
     playback = {k: getattr(pb, k) for k in ("solver", "substeps", "ke_zero")
                 if getattr(pb, k) != getattr(default, k)}
-    lines = [f"# written by jaxdse check --repair of {case.path}: the same .raw, the repaired .dyr",
-             "[case]", f"raw = {json.dumps(_rel(case.raw.source, out_dir))}",
+    same = str(raw_file) == str(case.raw.source)
+    lines = [f"# written by jaxdse check --repair of {case.path}: "
+             f"{'the same .raw' if same else 'the repaired .raw'}, the repaired .dyr",
+             "[case]", f"raw = {json.dumps(_rel(raw_file, out_dir) if same else Path(raw_file).name)}",
              f"dyr = {json.dumps(dyrs[0] if len(dyrs) == 1 else dyrs)}"]
     if playback:
         lines += ["", "[playback]"] + [f"{k} = {json.dumps(v)}" for k, v in playback.items()]
@@ -80,12 +102,15 @@ def _finite(row: dict) -> dict:
     return {k: (None if isinstance(v, float) and v != v else v) for k, v in row.items()}
 
 
-def attach_carried(doc: dict, dyr) -> None:
-    """Each unit's ``repairs``: the repairs its records carry (empty for most); the summary's
-    ``repaired_units``."""
+def attach_carried(doc: dict, dyr, raw=None) -> None:
+    """Each unit's ``repairs``: the repairs its records carry (empty for most): its generator's
+    .raw record's, then its .dyr records'; the summary's ``repaired_units``."""
     n = 0
     for e in doc["units"]:
-        rows = [_finite(c) for r in dyr.unit_records(e["bus"], e["id"]) for c in carried(r)]
+        gens = [g for g in (raw.generators if raw is not None else ())
+                if g.bus == e["bus"] and g.id.strip().upper() == str(e["id"]).upper()][:1]
+        rows = [_finite(c) for g in gens for c in carried_raw(g)]
+        rows += [_finite(c) for r in dyr.unit_records(e["bus"], e["id"]) for c in carried(r)]
         e["repairs"] = rows
         n += bool(rows)
     doc["repaired_units"] = n
@@ -133,7 +158,9 @@ def repair_html(doc: dict) -> str:
                        for x in r["not_repaired"])
         parts.append(
             f"<h2>Repair</h2><p>{len(r['changes'])} constant(s) of {r['units']} unit(s) changed, written to "
-            f"{html.escape(Path(r['files']['dyr']).name)} (the changes also in "
+            f"{html.escape(Path(r['files']['dyr']).name)}"
+            + (f" and {html.escape(Path(r['files']['raw']).name)} (generators' MBASE)" if "raw" in r["files"]
+               else "") + " (the changes also in "
             f"{html.escape(Path(r['files']['csv']).name)}; the case with the repaired records: "
             f"{html.escape(Path(r['files']['case']).name)}). Rule: {html.escape(r['rule'])}.</p>"
             "<table class=\"sortable\"><thead><tr><th>unit</th><th>record</th><th>.dyr line</th><th>CON</th>"

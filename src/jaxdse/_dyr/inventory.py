@@ -11,8 +11,9 @@ one-line reason, so that a check or a fleet can say what became of each:
   machine record: a unit whose records are incomplete (a data problem);
 * ``out of service`` -- status 0 (with or without dynamic records);
 * ``no dynamic records`` -- in service, no .dyr record on its bus and ID;
-* ``converter`` -- in service, a converter-interfaced source (REGCA1, WT4G1, PVGU1, ...):
-  not a synchronous machine;
+* ``inverter-based`` -- in service, a converter-interfaced plant (REGCA1, REECA1, REPCA1,
+  WT4G1, PVGU1, ...): a unit of the check, ``not supported`` where a record's model is not
+  simulated (named);
 * ``not a generator`` -- in service, a generator-data record whose dynamic record is a static
   var compensator or STATCOM (CSVGN1, CSTATT, SVSMO1, ...): not a generator;
 * ``duplicate`` -- a second generator record for the same bus and ID (the first is used).
@@ -32,10 +33,10 @@ from pathlib import Path
 from .._io.psse import DyrData, DyrRecord, RawCase, RawGenerator, generator_label, record_label
 from .records import record_kind
 
-GENERATOR_CATEGORIES = ("synchronous", "machine model unknown", "no machine record", "out of service",
-                        "no dynamic records", "converter", "not a generator", "duplicate")
+GENERATOR_CATEGORIES = ("synchronous", "inverter-based", "machine model unknown", "no machine record",
+                        "out of service", "no dynamic records", "not a generator", "duplicate")
 """The categories of a .raw generator record, in the order of the reports."""
-UNIT_CATEGORIES = ("synchronous", "machine model unknown", "no machine record")
+UNIT_CATEGORIES = ("synchronous", "inverter-based", "machine model unknown", "no machine record")
 """The categories whose in-service records are units of ``jaxdse check``."""
 SVC_MODELS = frozenset({
     "ABBSVC1", "CHSVCT", "CSTATT", "CSTCNT", "CSVGN1", "CSVGN3", "CSVGN4", "CSVGN5", "CSVGN6",
@@ -183,8 +184,7 @@ def _account(g: RawGenerator, recs: tuple[DyrRecord, ...]) -> GeneratorAccount:
         role, why = "not a generator", (f"{label}: a static var compensator or STATCOM "
                                         f"({', '.join(svc)}), not a generator")
     elif conv:
-        role, why = "converter", (f"{label}: a converter-interfaced source ({', '.join(conv)}), "
-                                  "not a synchronous machine")
+        role, why = "inverter-based", f"{label}: an inverter-based plant ({', '.join(conv)})"
     elif unknown:
         role, why = "machine model unknown", (
             f"{label}: no machine record jaxdse knows; "

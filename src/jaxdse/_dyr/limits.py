@@ -29,6 +29,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._io.measurement import MAX_LOADING, MAX_Q_LAGGING
 from .._models.exciters.common import saturation_product
 
 
@@ -323,6 +324,34 @@ def describe(crossing: Crossing) -> str:
             + (f" ({c.context})" if c.context else ""))
 
 
+PT_UNSET_MW = 9999.0
+"""PSS/E's default PT [MW]: at or above it, the .raw states no maximum output."""
+
+
+def rating_crossings(pg_mw: float, qg_mvar: float, mbase_mva: float) -> list[Crossing]:
+    """The generator's power flow outside the capability its .raw MBASE gives it: the apparent
+    power |PG + jQG| above ``MAX_LOADING`` x MBASE, or the lagging QG above ``MAX_Q_LAGGING`` x
+    MBASE (the field-heating limit): where ``jaxdse fleet`` refuses a recording of the unit (no
+    machine runs so far above its rating). MBASE is the base its dynamic records are per unit
+    of, so records set up for the unit's real rating read as a machine run beyond it (TM0 =
+    PG/MBASE; a governor's gate and an exciter's field voltage past their limits). The fix is the
+    base itself (:class:`Fix` "MBASE"; the apparent power is held within MBASE itself, the margin
+    ``MAX_LOADING`` only flags), the records' per-unit values kept."""
+    if not (mbase_mva > 0 and math.isfinite(mbase_mva)):
+        return []
+    out = []
+    s0 = math.hypot(pg_mw, qg_mvar)
+    if math.isfinite(s0) and s0 > MAX_LOADING * mbase_mva:
+        out.append(Crossing("|S0| = |PG + jQG|", s0, "MBASE", mbase_mva, "above",
+                            f"PG = {_g(pg_mw)} MW, QG = {_g(qg_mvar)} Mvar: {s0 / mbase_mva:.3g} x MBASE, "
+                            f"flagged above {MAX_LOADING:g} x", Fix("MBASE")))
+    if math.isfinite(qg_mvar) and qg_mvar > MAX_Q_LAGGING * mbase_mva:
+        out.append(Crossing("QG", qg_mvar, f"{MAX_Q_LAGGING:g}·MBASE", MAX_Q_LAGGING * mbase_mva, "above",
+                            f"the field-heating limit at P = 0; PG = {_g(pg_mw)} MW",
+                            Fix("MBASE", MAX_Q_LAGGING)))
+    return out
+
+
 def exciter_crossings(model: str, module, state, start: Start) -> list[Crossing]:
     """The exciter's steady-state signals outside their limits ([] for a model not listed)."""
     f = EXCITER_LIMITS.get(model)
@@ -337,5 +366,5 @@ def governor_crossings(model: str, module, start: Start) -> list[Crossing]:
     return [] if f is None else f(module, start)
 
 
-__all__ = ["EXCITER_LIMITS", "GOVERNOR_LIMITS", "Crossing", "Fix", "Start", "describe", "exciter_crossings",
-           "governor_crossings"]
+__all__ = ["EXCITER_LIMITS", "GOVERNOR_LIMITS", "PT_UNSET_MW", "Crossing", "Fix", "Start", "describe",
+           "exciter_crossings", "governor_crossings", "rating_crossings"]

@@ -14,6 +14,20 @@ outward to :data:`DIGITS` (4) significant figures. E.g. HYGOV gate0 = 2.139 abov
 = 2.139 + 0.107 = 2.246 -> 2.247. Where two crossings move one constant, the farther wins.
 Every other constant of every record is left as it is.
 
+**A machine base below the unit's own power flow.** Where the generator's .raw record puts its
+power-flow apparent power |PG + jQG| above 1.1 x its MBASE, or its lagging QG above 0.9 x MBASE
+(the field-heating limit; :func:`~jaxdse._dyr.limits.rating_crossings`, the loadings at which
+``jaxdse fleet`` refuses a recording), the records are per unit of a base below the machine's
+rating (ACTIVSg2000's hydro units: PG = PT = 2.5 x MBASE, all its other units MBASE = 1.2 x PT):
+TM0 = PG/MBASE runs the governor past its gate limit, and a recording of the unit, at 2.5 x its
+stated rating, is refused by ``jaxdse fleet``. The repair is MBASE (the same rule: |S0| 5 %
+inside MBASE, QG 5 % inside 0.9 x MBASE; the .raw's PT and the case's other generators' MBASE/PT
+are quoted in the reason), written into a ``repaired.raw`` (the field replaced in
+place, a ``/ jaxdse repair: ...`` comment at the end of the record's line); the records'
+per-unit values are kept, read on the new base. The unit's exciter and governor limits are then
+checked again at the new base (:func:`plan` lists it in :attr:`Plan.recheck`), and only what
+they still cross there is repaired.
+
 **The record's stated alternative.** A DC exciter (IEEEX1, IEEET1, EXDC2, ESDC1A, ESDC2A) with
 VRMAX = 0 states its limits as computed (PSS/E: VRMAX = (SE(E2) + KE)·E2, VRMIN = -VRMAX).
 Writing a VRMAX other than 0 ends that reading for both limits, so the other limit is written
@@ -39,10 +53,25 @@ from dataclasses import dataclass
 from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from pathlib import Path
 
-from .._io.psse import GOVERNOR_FIELDS, MACHINE_FIELDS, DyrChange, DyrData, DyrRecord, record_label
+import numpy as np
+
+from .._io.psse import (
+    GOVERNOR_FIELDS,
+    MACHINE_FIELDS,
+    DyrChange,
+    DyrData,
+    DyrRecord,
+    RawCase,
+    RawChange,
+    RawGenerator,
+    raw_repair_comment,
+    record_label,
+)
 from .._io.psse_common import is_comment
 from .._io.psse_dyr import repair_comment, token_spans
+from .._io.psse_raw_layouts import layout
 from .._models.exciters import EXCITER_FIELDS, exciter_from_dyr
+from .limits import PT_UNSET_MW, rating_crossings
 
 MARGIN = 0.05
 """The signal lies this fraction of its own magnitude inside the moved limit."""
@@ -96,16 +125,62 @@ class Change:
 
 
 @dataclass(frozen=True)
+class RawFieldChange:
+    """One field of a generator's .raw record changed (MBASE)."""
+
+    unit: str
+    generator: RawGenerator
+    con: str
+    index: int
+    """Its position in the record (0 = I, the bus)."""
+    old: float
+    new: float
+    why: str
+    signal: str = ""
+    value: float = math.nan
+    limit: str = ""
+    bound: float = math.nan
+    side: str = ""
+
+    @property
+    def origin(self) -> str:
+        return f"{Path(self.generator.source).name} line {self.generator.line}"
+
+    def as_raw(self) -> RawChange:
+        return RawChange(self.con, self.old, self.new, self.origin, self.why)
+
+    def row(self) -> dict:
+        """The change as check.json and repairs.csv give it (record "generator")."""
+        g = self.generator
+        return {"unit": self.unit, "bus": g.bus, "id": g.id.strip(), "record": "generator",
+                "file": Path(g.source).name, "line": g.line, "con": self.con, "con_number": self.index + 1,
+                "old": self.old, "new": self.new, "signal": self.signal, "value": self.value,
+                "limit": self.limit, "bound": self.bound, "side": self.side, "why": self.why}
+
+
+@dataclass(frozen=True)
 class Plan:
     """What ``--repair`` changes, and the data problems it leaves."""
 
     changes: tuple[Change, ...]
     not_repaired: tuple[dict, ...]
     """{"unit", "why"} of every data problem left as it is."""
+    raw_changes: tuple[RawFieldChange, ...] = ()
+    """Generators' MBASE changed (in repaired.raw)."""
+    recheck: tuple[str, ...] = ()
+    """Units whose MBASE changed: their other limits are to be checked again at the new base."""
 
     @property
     def units(self) -> list[str]:
-        return list(dict.fromkeys(c.unit for c in self.changes))
+        return list(dict.fromkeys([*(c.unit for c in self.raw_changes), *(c.unit for c in self.changes)]))
+
+    def merged(self, other: "Plan") -> "Plan":
+        """This plan with ``other``'s .dyr changes and leftovers of the units in
+        :attr:`recheck` (``other``: the plan of their check at the new bases)."""
+        mine = set(self.recheck)
+        return Plan(self.changes + tuple(c for c in other.changes if c.unit in mine),
+                    self.not_repaired + tuple(x for x in other.not_repaired if x["unit"] in mine),
+                    self.raw_changes, self.recheck)
 
 
 def con_names(record: DyrRecord) -> tuple[str, ...]:
@@ -144,10 +219,41 @@ def _moved(limit: dict) -> tuple[float, float] | None:
     return target, _outward(con, up=(sign * scale) > 0)
 
 
-def plan(doc: dict, dyr: DyrData, *, ke_zero: str = "psse") -> Plan:
+def _base_change(e: dict, lims: list[dict], raw: RawCase | None) -> RawFieldChange | None:
+    """The MBASE change of a unit whose power flow lies outside its MBASE's capability (the
+    farther crossing), with the .raw's own evidence: PT against MBASE, and the case's other
+    generators' MBASE/PT."""
+    g = raw.generator(e["bus"], e["id"]) if raw is not None else None
+    moves = [(lim, _moved(lim)) for lim in lims]
+    moves = [(lim, m) for lim, m in moves if m is not None]
+    if g is None or not moves:
+        return None
+    lim, (target, new) = max(moves, key=lambda x: x[1][1])
+    pt = (f"; its PT = {_g(g.pt_mw)} MW is {g.pt_mw / g.mbase_mva:.3g} x MBASE"
+          if 0 < g.pt_mw < PT_UNSET_MW and g.pt_mw > g.mbase_mva else "")
+    others = [x.mbase_mva / x.pt_mw for x in raw.generators
+              if x.stat == 1 and x is not g and 0 < x.pt_mw < PT_UNSET_MW and x.mbase_mva > 0
+              and not rating_crossings(x.pg_mw, x.qg_mvar, x.mbase_mva)]
+    usual = (f"; the case's other in-service generators have MBASE = {float(np.median(others)):.3g} x PT "
+             "(median)" if others else "")
+    fix = lim["fix"]
+    why = (f"{lim['signal']} = {_g(lim['value'])} above {lim['con']} = {_g(lim['bound'])} "
+           f"({lim['context']}); "
+           f"MBASE at least {_g((target - float(fix['offset'])) / float(fix['scale']))} puts it "
+           f"{100 * MARGIN:g} % inside{pt}{usual}; the records' per-unit values are kept, on the new base")
+    names = layout("generator", raw.revision)
+    return RawFieldChange(e["name"], g, "MBASE", names.index("MBASE"), float(g.mbase_mva), new, why,
+                          lim["signal"], float(lim["value"]), lim["con"], float(lim["bound"]), lim["side"])
+
+
+def plan(doc: dict, dyr: DyrData, *, ke_zero: str = "psse", raw: RawCase | None = None) -> Plan:
     """The changes that let every repairable data problem of a check (``doc``, the check.json
-    document of :func:`jaxdse._app.check.check_case` on ``dyr``) start at rest."""
+    document of :func:`jaxdse._app.check.check_case` on ``dyr`` and ``raw``) start at rest. A unit
+    whose .raw data lie above its MBASE gets the MBASE change alone, and is named in
+    :attr:`Plan.recheck`: its other limits are to be checked at the new base."""
     changes: list[Change] = []
+    raw_changes: list[RawFieldChange] = []
+    recheck: list[str] = []
     left: list[dict] = []
     for e in doc["units"]:
         if e["outcome"] != "data problem":
@@ -155,6 +261,16 @@ def plan(doc: dict, dyr: DyrData, *, ke_zero: str = "psse") -> Plan:
         limits = e.get("limits") or []
         if not limits:      # the check names the crossed limits, one reason each, then "hence: ..."
             left.append({"unit": e["name"], "why": "not a crossed limit: " + e["reasons"][0]})
+            continue
+        base = [lim for lim in limits if lim["record"] == "generator"]
+        if base:
+            c = _base_change(e, base, raw)
+            if c is None:
+                left.append({"unit": e["name"], "why": f"generator: {base[0]['signal']} above "
+                             "MBASE: the .raw record is not at hand to change"})
+            else:
+                raw_changes.append(c)
+                recheck.append(e["name"])
             continue
         mine: dict[tuple, Change] = {}
         fixed = True
@@ -185,7 +301,7 @@ def plan(doc: dict, dyr: DyrData, *, ke_zero: str = "psse") -> Plan:
                 mine[key] = c
         if fixed:
             changes.extend(_dc_stated(list(mine.values()), ke_zero))
-    return Plan(tuple(changes), tuple(left))
+    return Plan(tuple(changes), tuple(left), tuple(raw_changes), tuple(recheck))
 
 
 def _record(dyr: DyrData, e: dict, lim: dict) -> DyrRecord | None:
@@ -264,7 +380,9 @@ def _read(source: str) -> list[str]:
 
 def header(p: Plan, what: str) -> list[str]:
     """The comment lines that open a repaired file."""
-    return [f"/ jaxdse check --repair: {len(p.changes)} constant(s) changed on {len(p.units)} unit(s); "
+    units = len(dict.fromkeys(c.unit for c in p.changes))
+    base = (f" (and {len(p.raw_changes)} generator MBASE value(s) in repaired.raw)" if p.raw_changes else "")
+    return [f"/ jaxdse check --repair: {len(p.changes)} constant(s) changed on {units} unit(s){base}; "
             f"{what}",
             f"/ rule: {RULE}; each change is the '/ jaxdse repair:' line before its record"]
 
@@ -301,6 +419,72 @@ def repaired_dyr(p: Plan, sources: list[str]) -> tuple[str, bool]:
     return "".join(out), False
 
 
+def _raw_spans(text: str) -> list[tuple[int, int]]:
+    """(start, end) of each field of a .raw data line: comma-separated (blank-separated when no
+    comma stands outside quotes), quotes kept, the data ending at a '/' outside quotes."""
+    quote, cut = None, len(text)
+    for k, ch in enumerate(text):
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "/":
+            cut = k
+            break
+    body = text[:cut]
+    commas = [k for k, ch in enumerate(body) if ch == "," and not _quoted(body, k)]
+    if commas:
+        bounds = [-1, *commas, len(body)]
+        parts = [(bounds[i] + 1, bounds[i + 1]) for i in range(len(bounds) - 1)]
+    else:
+        parts, k = [], 0
+        while k < len(body):
+            if body[k].isspace():
+                k += 1
+                continue
+            a = k
+            q = body[k] if body[k] in "'\"" else None
+            k += 1
+            while k < len(body) and (q and body[k] != q or not q and not body[k].isspace()):
+                k += 1
+            k += 1 if q else 0
+            parts.append((a, k))
+    out = []
+    for a, b in parts:      # each field's text without its blanks
+        while a < b and body[a].isspace():
+            a += 1
+        while b > a and body[b - 1].isspace():
+            b -= 1
+        out.append((a, b))
+    return out
+
+
+def _quoted(text: str, at: int) -> bool:
+    quote = None
+    for ch in text[:at]:
+        if quote:
+            quote = None if ch == quote else quote
+        elif ch in "'\"":
+            quote = ch
+    return quote is not None
+
+
+def repaired_raw(p: Plan, source: str) -> str:
+    """The repaired .raw text: ``source`` with each changed field replaced in place and the
+    change as a comment at the end of the record's line (``/ jaxdse repair: MBASE ...``, read back
+    onto :attr:`RawGenerator.changes`); every other byte kept."""
+    lines = _read(source)
+    for c in p.raw_changes:
+        k = c.generator.line - 1
+        text = lines[k]
+        body = text.rstrip("\r\n")
+        end = text[len(body):]
+        a, b = _raw_spans(body)[c.index]
+        body = body[:a] + _num(c.new) + body[b:]
+        lines[k] = body + raw_repair_comment(c.as_raw()) + end
+    return "".join(lines)
+
+
 CSV_COLUMNS = ("unit", "bus", "id", "record", "file", "line", "con", "con_number", "old", "new",
                "signal", "value", "limit", "bound", "side", "why")
 
@@ -310,7 +494,7 @@ def changes_csv(p: Plan) -> str:
     f = io.StringIO()
     w = csv.DictWriter(f, fieldnames=CSV_COLUMNS, lineterminator="\n")
     w.writeheader()
-    for c in p.changes:
+    for c in (*p.raw_changes, *p.changes):
         w.writerow({k: (_num(v) if isinstance(v, float) and math.isfinite(v) else
                         "" if isinstance(v, float) else v) for k, v in c.row().items()})
     return f.getvalue()
@@ -335,6 +519,29 @@ def carried(record: DyrRecord) -> list[dict]:
     return out
 
 
+def carried_raw(g: RawGenerator) -> list[dict]:
+    """The repairs a generator's .raw record carries (its line's ``/ jaxdse repair:`` comment),
+    as :func:`carried` gives a record's."""
+    out = []
+    for c in g.changes:
+        now = float(g.mbase_mva) if c.con == "MBASE" else math.nan
+        held = math.isfinite(now) and math.isclose(now, c.new, rel_tol=1e-6, abs_tol=1e-12)
+        out.append({"record": "generator", "bus": g.bus, "id": g.id.strip(), "file": Path(g.source).name,
+                    "line": g.line, "con": c.con, "old": c.old, "new": c.new, "origin": c.origin,
+                    "why": c.why, "current": now if math.isfinite(now) else None, "holds_new": held})
+    return out
+
+
+def carried_raw_lines(g: RawGenerator) -> list[str]:
+    """One line per repair a generator's .raw record carries, for a unit's page."""
+    out = []
+    for c in carried_raw(g):
+        stale = "" if c["holds_new"] else f" (the record now holds {c['current']}, not the repaired value)"
+        out.append(f"generator on bus {g.bus} id {g.id.strip()!r} (.raw): {c['con']} {_num(c['old'])} -> "
+                   f"{_num(c['new'])} by jaxdse check --repair (was {c['origin']}): {c['why']}{stale}")
+    return out
+
+
 def carried_lines(records) -> list[str]:
     """One line per repair that ``records`` carry, for a unit's page."""
     out = []
@@ -348,5 +555,6 @@ def carried_lines(records) -> list[str]:
     return out
 
 
-__all__ = ["DIGITS", "MARGIN", "MIN_MARGIN_PU", "RULE", "Change", "Plan", "carried", "carried_lines",
-           "changes_csv", "con_names", "header", "plan", "repaired_dyr"]
+__all__ = ["DIGITS", "MARGIN", "MIN_MARGIN_PU", "RULE", "Change", "Plan", "RawFieldChange", "carried",
+           "carried_lines", "carried_raw", "carried_raw_lines", "changes_csv", "con_names", "header", "plan",
+           "repaired_dyr", "repaired_raw"]

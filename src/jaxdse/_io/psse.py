@@ -58,11 +58,13 @@ from .psse_raw import (
     RawBranch,
     RawBus,
     RawCase,
+    RawChange,
     RawFixedShunt,
     RawGenerator,
     RawLoad,
     RawSwitchedShunt,
     RawTransformer,
+    raw_repair_comment,
     read_raw,
 )
 
@@ -71,10 +73,12 @@ __all__ = [
     "ROUND_ROTOR", "SALIENT_POLE",
     "MACHINE_FIELDS", "OPTIONAL_TRAILING", "PSSE_GOVERNOR_MODELS", "SUPPORTED_RAW_REVISIONS",
     "TYPED_MODELS", "DyrChange", "DyrData", "DyrRecord", "MachineTransientData", "RawBranch", "RawBus",
-    "RawCase", "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer",
+    "RawCase", "RawChange", "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer",
     "generator_label", "governor_from_dyr", "governor_module", "load_unit", "machine_kwargs",
     "machine_problems",
     "machine_warnings",
-    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "read_raw", "record_label", "repair_comment",
+    "merge_dyr", "parse_number", "q_axis_problems", "read_dyr", "raw_repair_comment", "read_raw",
+    "record_label",
+    "repair_comment",
     "transformer_kwargs", "transformer_sides", "transient_data",
 ]

@@ -143,6 +143,47 @@ class RawGenerator:
     """Node of the regulated bus in its substation (revision 34 on; 0: none)."""
     baslod: int = 0
     """Base-load flag (revision 35 on)."""
+    changes: tuple = field(default=(), repr=False)
+    """The record's repairs by ``jaxdse check --repair`` (:class:`RawChange`), read back from
+    the ``/ jaxdse repair: ...`` comment at the end of its line (:func:`raw_repair_comment`)."""
+
+
+@dataclass(frozen=True)
+class RawChange:
+    """One field of a .raw record changed by ``jaxdse check --repair`` (e.g. a generator's
+    MBASE below its own maximum output), carried by the record's end-of-line comment."""
+
+    con: str
+    """The field's PSS/E name ("MBASE")."""
+    old: float
+    new: float
+    origin: str
+    """Where the original record stands, e.g. "case.raw line 120"."""
+    why: str
+
+
+RAW_REPAIR_TAG = "jaxdse repair:"
+_RAW_REPAIR = re.compile(r"jaxdse repair:\s*(?P<con>\S+) (?P<old>\S+) -> (?P<new>\S+) "
+                         r"\((?P<origin>[^)]*)\):\s*(?P<why>.*?)\s*$")
+
+
+def raw_repair_comment(c: RawChange) -> str:
+    """The end-of-line comment (after the record's data) that carries ``c`` (read back by
+    :func:`read_raw` onto :attr:`RawGenerator.changes`); no '/' inside, as PSS/E ends the data
+    at the first one."""
+    why = " ".join(c.why.split()).replace("/", " per ")
+    return f" / {RAW_REPAIR_TAG} {c.con} {c.old:.7g} -> {c.new:.7g} ({c.origin}): {why}"
+
+
+def _raw_changes(comment: str) -> tuple:
+    m = _RAW_REPAIR.search(comment or "")
+    if m is None:
+        return ()
+    try:
+        old, new = float(m["old"]), float(m["new"])
+    except ValueError:
+        return ()
+    return (RawChange(m["con"], old, new, m["origin"], m["why"]),)
 
 
 @dataclass(frozen=True)
@@ -455,13 +496,15 @@ class _Sections:
     """Sections closed."""
     lines: dict
     """Section -> line of its first record."""
+    comments: dict = field(default_factory=dict)
+    """Line -> end-of-line comment, for the records whose comment carries a repair."""
 
 
 def _read_sections(data, source: str, revision: int, title_line: int) -> _Sections:
     """Group the data lines by section (the revision's list), checking the ``0`` records."""
     names = SECTIONS[revision]
     records = {n: [] for n in names if n in READ}
-    counts, first = {}, {}
+    counts, first, comments = {}, {}, {}
     k, last_line, ended_by_q = 0, title_line, False
     if names[0] == "system-wide":
         # A revision-34+ writer may omit the system-wide section: a first record that starts
@@ -524,6 +567,8 @@ def _read_sections(data, source: str, revision: int, title_line: int) -> _Sectio
         first.setdefault(name, line)
         if name in READ:
             records[name].append((line, flds))
+            if comment and RAW_REPAIR_TAG in comment:
+                comments[line] = comment
     required_end = max(names.index(n) for n in REQUIRED)
     if k <= required_end:
         how = "Q" if ended_by_q else "the end of the file"
@@ -532,7 +577,7 @@ def _read_sections(data, source: str, revision: int, title_line: int) -> _Sectio
     if k < len(names) and names[k] in READ and counts.get(names[k]) and not ended_by_q:
         raise InputError(source, f"the {names[k]} data section is not closed by a '0' record "
                          "before the end of the file (and no Q ends the data)", row=last_line)
-    return _Sections(records, counts, k, first)
+    return _Sections(records, counts, k, first, comments)
 
 
 def _label(name: str) -> str:
@@ -651,7 +696,8 @@ def read_raw(path, *, strict: bool = True) -> RawCase:
             gtap=r.num("GTAP", 1.0), stat=r.int("STAT", 1), rmpct=r.num("RMPCT", 100.0),
             pt_mw=r.num("PT", 9999.0), pb_mw=r.num("PB", -9999.0), line=line, source=source,
             nreg=r.int("NREG", 0) if r.has("NREG") else 0,
-            baslod=r.int("BASLOD", 0) if r.has("BASLOD") else 0, problem=r.problem)
+            baslod=r.int("BASLOD", 0) if r.has("BASLOD") else 0, problem=r.problem,
+            changes=_raw_changes(sec.comments.get(line, "")))
         if g.bus is None:
             problems.append(f"{r.problem} (record dropped)")
             continue
@@ -770,6 +816,7 @@ def _read_transformers(records, source, sbase, rev):
 
 
 __all__ = [
-    "SUPPORTED_RAW_REVISIONS", "RawBranch", "RawBus", "RawCase", "RawFixedShunt", "RawGenerator",
-    "RawLoad", "RawSwitchedShunt", "RawTransformer", "read_raw",
+    "RAW_REPAIR_TAG", "SUPPORTED_RAW_REVISIONS", "RawBranch", "RawBus", "RawCase", "RawChange",
+    "RawFixedShunt", "RawGenerator", "RawLoad", "RawSwitchedShunt", "RawTransformer", "raw_repair_comment",
+    "read_raw",
 ]

@@ -405,6 +405,9 @@ SUMMARY_KEYS = {
                  "frame (the estimate's own wait: its lookahead and the reorder buffer) plus this times the pace",
     "pace": "per stream, stream seconds per wall second (1 in real time; 5 for pmu-sim --speed 5)",
     "processing_ms_per_frame": "the main thread's time per data frame, its updates included [ms]",
+    "inertia_delay_s": "with [inertia], per set of area lines, stream seconds from the lines' time to their "
+                       "emission (the area estimate holds each unit's latest update, itself delay_s after its "
+                       "window's last frame)",
 }
 UNIT_COUNTS = {
     "unusable_samples": "per unit, samples not used: STAT data error or lost sync, NaN, or a value outside "
@@ -738,6 +741,7 @@ class Monitor:
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
         self.alarms = {}
         self.inertia_alarms = {}   # area -> E below the floor
+        self.inertia_delays = []   # [s of stream time] per inertia line set, from its time to its emission
         self.updates = 0
         self.latest = {}
         self.delays = []         # [s of stream time] per update, from the window's last frame
@@ -745,6 +749,13 @@ class Monitor:
         self.monitor_s = []      # [s of wall time] per emission, from the newest frame's arrival to it
         self._jsonl = None if self.out_dir is None else open(self.out_dir / "updates.jsonl", "w")
         self._next_report = None
+        self.inertia = None
+        if cfg.inertia is not None:
+            from .inertia import tracker_for
+
+            self.inertia = tracker_for(cfg.units, self.est, cfg.inertia, self.log)
+            for s in self.streams:
+                s.tracker = self.inertia
         self.publisher = None
         if cfg.publish is not None:
             opts = dict(cfg.publish)
@@ -755,19 +766,15 @@ class Monitor:
 
             f_nom = round(float(cfg.units[0].run.measurement.f_nominal_hz))
             self.publisher = Publisher([u.name for u in cfg.units], update_s=cfg.update_s, f_nominal_hz=f_nom,
-                                       log=self.log, **opts)
-        self.inertia = None
-        if cfg.inertia is not None:
-            from .inertia import tracker_for
-
-            self.inertia = tracker_for(cfg.units, self.est, cfg.inertia, self.log)
-            for s in self.streams:
-                s.tracker = self.inertia
+                                       log=self.log, **opts, **({} if self.inertia is None else {
+                                           "areas": self.inertia.areas + ["system"],
+                                           "floor_MWs": cfg.inertia.floor_MWs}))
         self.view = None
         if cfg.view is not None:
             from .view import LiveView
 
-            self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view)
+            self.view = LiveView([u.name for u in cfg.units], self._status, **cfg.view,
+                                 floor_MWs=None if cfg.inertia is None else cfg.inertia.floor_MWs)
         self.processing = []     # seconds of the main thread per data frame (updates included)
 
     def emit(self, updates: list[Update], stream: _Stream | None = None, timed: bool = True):
@@ -923,7 +930,7 @@ class Monitor:
                     s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
                 self.emit(s.on_data(x), s)
                 if self.inertia is not None and s.released is not None:
-                    self._inertia_lines(self.inertia.tick(s.released / s.rate))
+                    self._inertia_lines(self.inertia.tick(s.released / s.rate), s)
             if isinstance(x, c3.DataFrame) and len(self.processing) < MAX_TIMINGS:
                 self.processing.append(time.perf_counter() - t0)
         elif kind == "counts":
@@ -940,13 +947,26 @@ class Monitor:
             if s.counts["disconnects"] + s.counts["connect_failures"]:
                 self.log(f"stream {k}: reconnected to {x}")
 
-    def _inertia_lines(self, lines: list[dict]):
-        """The system inertia's lines to ``updates.jsonl``; the floor's alarm in the log."""
+    def _inertia_lines(self, lines: list[dict], stream: _Stream | None = None):
+        """The system inertia's lines to ``updates.jsonl``; the floor's alarm in the log; the
+        delay from a line's time to its emission on ``stream``'s clock (``inertia_delay_s``)."""
         if not lines:
             return
+        if stream is not None and len(self.inertia_delays) < MAX_TIMINGS:
+            now = stream.clock.now(time.monotonic())
+            if now is not None:
+                self.inertia_delays.extend(now - t for t in sorted({x["t"] for x in lines}))
         if self._jsonl is not None:
             self._jsonl.write("".join(json.dumps(x) + "\n" for x in lines))
             self._jsonl.flush()
+        if self.view is not None:
+            self.view.add_inertia(lines)
+        if self.publisher is not None:
+            by_t = defaultdict(list)
+            for x in lines:
+                by_t[x["t"]].append(x)
+            for t in sorted(by_t):
+                self.publisher.publish_inertia(t, by_t[t])
         floor = self.cfg.inertia.floor_MWs
         for a in self.inertia.latest:
             was = self.inertia_alarms.get(a.area, False)
@@ -985,6 +1005,9 @@ class Monitor:
                         for s in self.streams],
             "published": None if self.publisher is None else dict(self.publisher.stats),
             "latest": {name: update_line(u, self.alarms.get(name, False)) for name, u in self.latest.items()},
+            "inertia_delay_s": None if not self.inertia_delays else {
+                "median": float(np.median(self.inertia_delays)), "p99": float(np.quantile(self.inertia_delays, 0.99)),
+                "max": float(np.max(self.inertia_delays))},
             "inertia": None if self.inertia is None else [
                 {**a.line(None), "rocof_ci95": a.rocof_ci95, "rocof_reason": a.rocof_reason,
                  "units_stale": a.units_stale, "units_without_h": a.units_without_h, "below_floor": a.below_floor}

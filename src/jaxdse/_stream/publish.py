@@ -10,6 +10,14 @@ stamped with the window's last frame's time (the reporting rate is 1 / ``update_
   error, NaN) for ``failed``; 10 (absent, NaN) for a unit without an update in this frame;
 * bit 11 (trigger) with reason 8 (user defined) while the unit's H alarm is on.
 
+With ``[inertia]``, one more station per area and one for the system, named ``E <area>``
+(``E system``), after the units', with the float analogs of ``AREA_ANALOGS``: ``E``, ``E_LO``,
+``E_HI`` [MW s] (E and its 95 % interval), ``SHARE`` (the measured share), ``E_COMMIT`` [MW s]
+(the commitment figure), ``ROCOF`` [Hz/s] (NaN where none), ``ONLINE`` and ``MEASURED`` (unit
+counts). Their values come in data frames of their own, stamped with the inertia line's time (every
+``[inertia] update_s`` of stream time), in which the units' stations are absent (and the area
+stations are absent in the units' frames); bit 11 (trigger, reason 8) while E is below the floor.
+
 The server (asyncio, one thread) answers the standard's commands over TCP (CFG-1/2/3, header,
 data on and off), binds 127.0.0.1 unless told otherwise, serves at most 16 clients and drops
 (and counts) the frames of a client whose unsent data exceed 1 MiB.
@@ -30,6 +38,8 @@ from .pmu_sim import SEND_BUFFER_BYTES, serve_client, short_names
 from .waits import join
 
 ANALOGS = ("H", "H_LO", "H_HI", "D", "AGE")
+AREA_ANALOGS = ("E", "E_LO", "E_HI", "SHARE", "E_COMMIT", "ROCOF", "ONLINE", "MEASURED")
+"""A system inertia station's analogs (an updates.jsonl area line's fields)."""
 ALARM_TRIGGER_REASON = 8
 DATA_ERROR = {"identified": c3.GOOD, "weakly identified": c3.GOOD, "not excited": c3.PMU_ERROR_NO_INFO,
               "failed": c3.PMU_ERROR}
@@ -42,20 +52,34 @@ def published_values(u: Update) -> list:
     return [u.h_s, *(u.h_ci95 or (None, None)), u.d_pu_s, u.age_s]
 
 
+def area_station(area: str) -> str:
+    """The station (C37.118) or device (STTP) of an area's system inertia."""
+    return f"E {area}"
+
+
+def area_values(line: dict) -> list:
+    """The values of ``AREA_ANALOGS`` for an updates.jsonl area line (None: none)."""
+    return [line["E_MWs"], *line["E_ci95"], line["measured_share"], line["E_commitment_MWs"],
+            line["rocof_hz_per_s"], line["units_online"], line["units_measured"]]
+
+
 class Publisher:
     """Serves the monitor's updates (see the module docstring); :meth:`publish` from any thread."""
 
     def __init__(self, units: list[str], *, host: str = "127.0.0.1", port: int = 4713, idcode: int = 7734,
-                 update_s: float = 1.0, f_nominal_hz: int = 50, log=None):
+                 update_s: float = 1.0, f_nominal_hz: int = 50, log=None, areas=(), floor_MWs: float | None = None):
         self.units, self.host, self.port, self.idcode = list(units), host, port, idcode
+        self.areas, self.floor_MWs = list(areas), floor_MWs
         self.log = log or (lambda line: None)
         rate = 1.0 / update_s
         data_rate = round(rate) if rate >= 1 else -round(update_s)
-        short = short_names(self.units)
+        self.names = self.units + [area_station(a) for a in self.areas]
+        short = short_names(self.names)
         self.stations = tuple(c3.StationConfig(
-            short[k], (idcode + k) % 65534 + 1, (), tuple(c3.AnalogChannel(a, 1) for a in ANALOGS),
+            short[k], (idcode + k) % 65534 + 1, (),
+            tuple(c3.AnalogChannel(a, 1) for a in (ANALOGS if k < len(self.units) else AREA_ANALOGS)),
             polar=True, phasor_float=True, analog_float=True, freq_float=True, fnom_hz=f_nominal_hz)
-            for k in range(len(self.units)))
+            for k in range(len(self.names)))
         self.config = c3.ConfigFrame(idcode, self.stations, data_rate)
         if self.config.data_size > c3.MAX_FRAME:
             raise ValueError(f"{len(self.units)} units make frames beyond C37.118's 65535 bytes")
@@ -123,15 +147,14 @@ class Publisher:
                 import dataclasses
 
                 cfg = dataclasses.replace(cfg, stations=tuple(
-                    dataclasses.replace(s, name=u) for s, u in zip(self.stations, self.units)))
+                    dataclasses.replace(s, name=u) for s, u in zip(self.stations, self.names)))
                 return c3.encode_cfg3_fragments(cfg)
             return [c3.encode(cfg)]
         return []
 
     def frame(self, t: float, updates: list[Update], alarms: dict) -> bytes:
         """The data frame of the updates at time ``t`` [s since 1970]."""
-        blocks = [c3.StationData(stat=c3.Stat(data_error=c3.TEST_OR_ABSENT).word, freq=self.f_nominal,
-                                 analogs=np.full(len(ANALOGS), np.nan)) for _ in self.units]
+        blocks = self._absent()
         for u in updates:
             k = self.index.get(u.unit)
             if k is None:
@@ -142,13 +165,39 @@ class Publisher:
                            trigger_reason=ALARM_TRIGGER_REASON if alarm else 0).word
             blocks[k] = c3.StationData(stat=stat, freq=self.f_nominal,
                                        analogs=np.array([math.nan if v is None else v for v in values], float))
+        return self._encode(t, blocks)
+
+    def inertia_frame(self, t: float, lines: list[dict]) -> bytes:
+        """The data frame of the system inertia's lines at ``t`` [s since 1970] (one per area)."""
+        blocks = self._absent()
+        for x in lines:
+            if x["area"] not in self.areas:
+                continue
+            below = self.floor_MWs is not None and x["E_MWs"] < self.floor_MWs
+            stat = c3.Stat(data_error=c3.GOOD, trigger=below, trigger_reason=ALARM_TRIGGER_REASON if below else 0).word
+            blocks[len(self.units) + self.areas.index(x["area"])] = c3.StationData(
+                stat=stat, freq=self.f_nominal,
+                analogs=np.array([math.nan if v is None else v for v in area_values(x)], float))
+        return self._encode(t, blocks)
+
+    def _absent(self) -> list:
+        return [c3.StationData(stat=c3.Stat(data_error=c3.TEST_OR_ABSENT).word, freq=self.f_nominal,
+                               analogs=np.full(len(s.analogs), np.nan)) for s in self.stations]
+
+    def _encode(self, t: float, blocks: list) -> bytes:
         soc = int(math.floor(t))
         frac = min(int(round((t - soc) * self.config.time_base)), self.config.time_base - 1)
         return c3.encode(c3.DataFrame(self.idcode, blocks, soc, frac), self.config)
 
     def publish(self, t: float, updates: list[Update], alarms: dict):
         """Send the frame of ``updates`` at ``t`` to every client with data on (thread-safe)."""
-        data = self.frame(t, updates, alarms)
+        self._queue(self.frame(t, updates, alarms))
+
+    def publish_inertia(self, t: float, lines: list[dict]):
+        """Send the frame of the system inertia's ``lines`` at ``t`` (thread-safe)."""
+        self._queue(self.inertia_frame(t, lines))
+
+    def _queue(self, data: bytes):
         self.stats["frames"] += 1
         if self._loop is not None:
             self._loop.call_soon_threadsafe(self._send, data)

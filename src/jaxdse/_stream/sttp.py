@@ -41,7 +41,11 @@ interface, so the listening socket is made here) with one device per unit and th
 ``<unit>:H``, ``<unit>:H_LO``, ``<unit>:H_HI`` (the 95 % interval) [s], ``<unit>:D`` [pu torque
 per rad/s], ``<unit>:AGE`` [s], ``<unit>:STATE`` (the verdict: 0 identified, 1 weakly
 identified, 2 not excited, 3 failed) and ``<unit>:ALARM`` (1 while the unit's H alarm is on),
-stamped with the window's last frame's time. Their signal IDs are name-based UUIDs of the point
+stamped with the window's last frame's time. With ``[inertia]``, one more device per area and
+one for the system, ``E <area>`` (``E system``), with ``E <area>:E``, ``:E_LO``, ``:E_HI``
+[MW s], ``:SHARE``, ``:E_COMMIT`` [MW s], ``:ROCOF`` [Hz/s], ``:ONLINE``, ``:MEASURED`` (the
+updates.jsonl area line's fields, stamped with its time) and ``:ALARM`` (1 while E is below the
+floor; ALARMLOW on ``E`` too). Their signal IDs are name-based UUIDs of the point
 tags (the same every run); all carry STTP's CALCULATEDVALUE flag. Values are NaN, with STTP's
 BADDATA flag, where the window did not identify H (not excited, failed); weakly identified ones
 carry SUSPECTDATA; an H alarm sets ALARMLOW on H. STTP carries values as 32-bit floats. At most
@@ -68,7 +72,7 @@ import numpy as np
 
 from .._io.errors import InputError
 from . import c37118 as c3
-from .publish import published_values
+from .publish import AREA_ANALOGS, area_station, area_values, published_values
 from .waits import Backoff, join, put
 
 DEFAULT_PORT = 7165
@@ -282,8 +286,11 @@ class SttpPublisher:
     :class:`~.publish.Publisher`: :meth:`start`, :meth:`publish` (any thread), :meth:`stop`."""
 
     def __init__(self, units: list[str], *, host: str = "127.0.0.1", port: int = PUBLISH_PORT,
-                 idcode: int = 0, update_s: float = 1.0, f_nominal_hz: int = 50, log=None):
+                 idcode: int = 0, update_s: float = 1.0, f_nominal_hz: int = 50, log=None, areas=(),
+                 floor_MWs: float | None = None):
         self.units, self.host, self.port, self.idcode = list(units), host, port, idcode
+        self.floor_MWs = floor_MWs
+        self.area_ids = {a: [signal_id(f"{area_station(a)}:{o}") for o in (*AREA_ANALOGS, "ALARM")] for a in areas}
         self.log = log or (lambda line: None)
         fps = max(1, round(1.0 / update_s))
         self.ids = {u: [signal_id(f"{u}:{o}") for o in OUTPUTS] for u in self.units}
@@ -295,7 +302,15 @@ class SttpPublisher:
                       "age of the last identified H [s]",
                       "verdict: 0 identified, 1 weakly identified, 2 not excited, 3 failed",
                       "1 while the H alarm is on"))]
-        self.xml = metadata_xml([(u, fps) for u in self.units], points)
+        points += [(area_station(a), f"{area_station(a)}:{o}", sid, "ALRM" if o == "ALARM" else "CALC", description)
+                   for a in self.area_ids
+                   for o, sid, description in zip((*AREA_ANALOGS, "ALARM"), self.area_ids[a], (
+                       "stored kinetic energy E [MW s]", "E, lower end of the 95 % interval [MW s]",
+                       "E, upper end of the 95 % interval [MW s]", "measured share of E",
+                       "commitment figure [MW s]", "rate of change of frequency after the largest loss [Hz/s]",
+                       "units online", "units measured", "1 while E is below the floor"))]
+        self.xml = metadata_xml([(u, fps) for u in self.units] + [(area_station(a), fps) for a in self.area_ids],
+                                points)
         self.stats = {"frames": 0, "sent": 0, "dropped_slow_client": 0}
         self.bound = None
         self._listener = None
@@ -329,6 +344,29 @@ class SttpPublisher:
             out.append(Measurement(ids[5], np.float64(STATE[u.verdict]), ticks, np.uint32(CALCULATED)))
             out.append(Measurement(ids[6], np.float64(1.0 if alarm else 0.0), ticks, np.uint32(CALCULATED)))
         return out
+
+    def inertia_measurements(self, t: float, lines: list[dict]) -> list:
+        """The STTP measurements of the system inertia's ``lines`` at ``t`` [s since 1970]."""
+        from sttp.transport.measurement import Measurement
+
+        ticks = np.uint64(ticks_of_time(t))
+        out = []
+        for x in lines:
+            ids = self.area_ids.get(x["area"])
+            if ids is None:
+                continue
+            below = self.floor_MWs is not None and x["E_MWs"] < self.floor_MWs
+            for k, v in enumerate(area_values(x)):
+                f = CALCULATED | (ALARMLOW if below and k == 0 else 0) | (BADDATA if v is None else 0)
+                out.append(Measurement(ids[k], np.float64(math.nan if v is None else v), ticks, np.uint32(f)))
+            out.append(Measurement(ids[-1], np.float64(1.0 if below else 0.0), ticks, np.uint32(CALCULATED)))
+        return out
+
+    def publish_inertia(self, t: float, lines: list[dict]):
+        """Queue the measurements of the system inertia's ``lines`` at ``t`` (thread-safe)."""
+        self.stats["frames"] += 1
+        if self._listener is not None:
+            self._listener.put(self.inertia_measurements(t, lines))
 
     def publish(self, t: float, updates, alarms: dict):
         """Queue the measurements of ``updates`` at ``t`` for the subscribers (thread-safe)."""

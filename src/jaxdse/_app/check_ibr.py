@@ -1,0 +1,307 @@
+"""``jaxdse check`` of an inverter-based plant (REGCA1 + REECA1, optional REPCA1): its records,
+its runs and its judgement, beside the synchronous units of :mod:`jaxdse._app.check`.
+
+Three runs with the terminal voltage imposed (as the playback drives a plant: the measured
+voltage phasor and frequency), from the power flow at the terminal:
+
+  held    voltage and frequency held: every state derivative at t = 0 below 1e-6, P and Q at
+          20 s within 1e-5 pu of the power flow;
+  vstep   |V| stepped by 2 % at 1 s, the voltage references (REECA1 Vref0/Vref1, REPCA1 Vref)
+          moved with it (an imposed voltage leaves the voltage loops open: their integrators
+          would otherwise wind up to a limit);
+  fstep   the frequency stepped by 0.1 Hz at 1 s (the plant controller's droop and its P loop,
+          Fflag = 1; no effect without a plant controller or with Fflag = 0).
+
+The steps pass when they stay finite and settle, or are still settling at the end with every mode
+of the linearisation there decaying (a plant controller's slow P loop, noted with its time
+constant); the voltage step is not judged where REECA1's inner voltage loop closes only through
+the network (QFLAG = 1 with VFLAG = 1, noted): over the last 5 s P and Q within 10 % of the
+range they span after the step (at least 0.001 pu) of their final value, every state derivative
+below 1e-2. A data problem is a record whose values cannot be simulated, or whose limits the
+power flow crosses (P0 outside PMIN..PMAX, Q0 outside QMIN..QMAX, |I0| above IMAX: the CON and
+both values named).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._dyr.ibr_unit import IbrUnit
+from .._dyr.inventory import is_converter
+from .._dyr.records import PSSE_IBR_MODELS, ibr_model
+from .._dyr.stiff import modes
+from .._dyr.unit import UnitInputs
+from .._io.psse import DyrData, RawCase, RawGenerator, record_label
+from .._models.ibr import IBR_MODELS
+
+IBR_KINDS = ("converter", "electrical", "plant")
+"""The roles of a plant's records, in the order of the reports."""
+F_STEP_HZ = 0.1
+"""The frequency step of the third run [Hz]."""
+
+
+class IbrStatic(NamedTuple):
+    models: dict
+    records: dict
+    unsupported: list
+    problems: list
+    model: object
+    warnings: list
+
+
+def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator) -> IbrStatic:
+    """The plant's records by role, the ones jaxdse does not simulate, the value problems its
+    models' checks find, and the limits its power flow crosses (one line each, naming the
+    record and the CON)."""
+    recs = dyr.unit_records(g.bus, g.id)
+    models: dict = dict.fromkeys(IBR_KINDS)
+    records: dict = {}
+    unsupported = []
+    for r in recs:
+        role = PSSE_IBR_MODELS.get(r.model)
+        if role is None and not is_converter(r.model):
+            continue
+        if role in IBR_KINDS and role not in records:
+            records[role], models[role] = r, r.model
+        if r.model not in IBR_MODELS:
+            what = {"wind": "type-3 wind turbine model", None: "converter model"}.get(role, f"{role} model")
+            unsupported.append((r.model, f"{record_label(r)}: {what} {r.model} is not simulated by jaxdse "
+                                         f"(inverter-based models simulated: {', '.join(IBR_MODELS)})"))
+    um = ibr_model(dyr, g.bus, g.id)
+    problems = []
+    for line in um.missing:
+        if "is not simulated" in line:
+            continue
+        at = [r.model for r in recs if line.startswith(record_label(r))]
+        problems.append((at[0] if at else None, line))
+    if g.problem:
+        problems.append(("generator", g.problem))
+    if not (math.isfinite(g.mbase_mva) and g.mbase_mva > 0):
+        problems.append(("generator", f"generator on bus {g.bus} id {g.id!r}: MBASE = {g.mbase_mva:g} "
+                                      "must be > 0"))
+    bus = raw.buses.get(g.bus)
+    if bus is None or bus.problem or not (math.isfinite(bus.vm_pu) and bus.vm_pu > 0):
+        problems.append(("bus", f"bus {g.bus} of the generator: no usable voltage VM"))
+    elif um.unit is not None and not problems:
+        problems += _crossings(um.unit, records, g, bus.vm_pu)
+    return IbrStatic(models, records, unsupported, problems, um, [])
+
+
+def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float) -> list:
+    """The limits of the records that the power flow crosses at the start."""
+    p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
+    i0 = math.hypot(p0, q0) / vt
+    where = (f"PG = {g.pg_mw:g} MW, QG = {g.qg_mvar:g} Mvar on MBASE = {g.mbase_mva:g} MVA, "
+             f"VT = {vt:.4g} pu")
+    out = []
+
+    def cross(role, con, value, bound, side, signal):
+        if (side == "above" and value > bound + 1e-9) or (side == "below" and value < bound - 1e-9):
+            out.append((records[role].model,
+                        f"{record_label(records[role])}: {signal} = {value:.4g} pu {side} {con} = {bound:.4g} "
+                        f"({where}): the record's own limit does not let the plant hold its power flow"))
+
+    e = unit.electrical
+    cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
+    cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
+    cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
+    if e.qflag or not e.vflag:
+        cross("electrical", "QMAX", q0, float(e.q_max_pu), "above", "Q0")
+        cross("electrical", "QMIN", q0, float(e.q_min_pu), "below", "Q0")
+    if unit.plant is not None:
+        cross("plant", "QMAX", q0, float(unit.plant.q_max_pu), "above", "Qext0")
+        cross("plant", "QMIN", q0, float(unit.plant.q_min_pu), "below", "Qext0")
+        cross("plant", "PMAX", p0, float(unit.plant.p_max_pu), "above", "Pref0")
+        cross("plant", "PMIN", p0, float(unit.plant.p_min_pu), "below", "Pref0")
+    return out
+
+
+class IbrLane(NamedTuple):
+    """One run of one plant: the power flow at its terminal, the voltage step (fraction of |V|)
+    and the frequency step [pu of nominal]."""
+
+    v_re: jax.Array
+    v_im: jax.Array
+    i_re: jax.Array
+    i_im: jax.Array
+    v_step: jax.Array
+    f_step: jax.Array
+
+
+class IbrResult(NamedTuple):
+    dy0: jax.Array
+    y0: jax.Array
+    p_t0: jax.Array
+    q_t0: jax.Array
+    p: jax.Array
+    q: jax.Array
+    dy_end: jax.Array
+    jac_t0: jax.Array
+    jac_end: jax.Array
+    ok: jax.Array
+
+
+def lanes(raw: RawCase, g: RawGenerator, v_step: float) -> list[IbrLane]:
+    """The held, voltage-step and frequency-step runs of generator ``g``."""
+    b = raw.buses[g.bus]
+    v = b.vm_pu * complex(math.cos(math.radians(b.va_deg)), math.sin(math.radians(b.va_deg)))
+    i = ((g.pg_mw + 1j * g.qg_mvar) / g.mbase_mva / v).conjugate()
+    df = F_STEP_HZ / raw.basfrq_hz
+    return [IbrLane(*(jnp.asarray(float(x)) for x in (v.real, v.imag, i.real, i.imag, dv, f)))
+            for dv, f in ((0.0, 0.0), (v_step, 0.0), (0.0, df))]
+
+
+def _one(unit: IbrUnit, lane: IbrLane, run) -> IbrResult:
+    from .check import _integrate
+
+    zero = jnp.zeros_like(lane.v_re)
+    u0 = UnitInputs(lane.v_re, lane.v_im, zero, zero)
+    y0, refs = unit.initial_state(u0, lane.i_re, lane.i_im)
+    dy0 = unit.vector_field(y0, u0, refs)
+    jac0 = jax.jacfwd(lambda y: unit.vector_field(y, u0, refs))(y0)
+    s0 = unit.signals(y0, u0, refs)
+    v0 = jnp.hypot(lane.v_re, lane.v_im)
+
+    def at(t):   # the steps just after step_at_s; the voltage references move with |V|
+        on = t > run.step_at_s
+        k = 1.0 + jnp.where(on, lane.v_step, 0.0)
+        dv = jnp.where(on, lane.v_step * v0, 0.0)
+        e = refs.electrical._replace(v_ref0_pu=refs.electrical.v_ref0_pu + dv,
+                                     v_ref1_pu=refs.electrical.v_ref1_pu + dv)
+        p = refs.plant._replace(v_ref_pu=refs.plant.v_ref_pu + dv)
+        return (UnitInputs(lane.v_re * k, lane.v_im * k, jnp.where(on, lane.f_step, 0.0), zero),
+                refs._replace(electrical=e, plant=p))
+
+    def rhs(t, y, args):
+        return unit.vector_field(y, *at(t))
+
+    n = int(round(run.end_s * run.frame_hz)) + 1
+    ts = np.arange(n) / run.frame_hz
+    ys, solved = _integrate(rhs, y0, run, n)
+
+    def outputs(t, y):
+        s = unit.signals(y, *at(t))
+        return s.p_pu, s.q_pu
+
+    p, q = jax.vmap(outputs)(jnp.asarray(ts), ys)
+    ok = solved & jnp.all(jnp.isfinite(ys))
+    y_end = jnp.where(ok, ys[-1], y0)
+    dy_end = rhs(run.end_s, y_end, None)
+    jac_end = jax.jacfwd(lambda y: rhs(run.end_s, y, None))(y_end)
+    return IbrResult(dy0, y0, s0.p_pu, s0.q_pu, p, q, dy_end, jac0, jac_end, ok)
+
+
+_BATCH: list = []
+
+
+def batch_jit():
+    """The jitted, vmapped :func:`_one` (made once)."""
+    if not _BATCH:
+        _BATCH.append(eqx.filter_jit(eqx.filter_vmap(_one, in_axes=(0, 0, None))))
+    return _BATCH[0]
+
+
+def at(r: IbrResult, j: int) -> dict:
+    """Lane ``j`` of ``r`` (host arrays) with its modes (host NumPy)."""
+    out = {f: np.asarray(getattr(r, f)[j]) for f in r._fields}
+    out["growth_end"], out["fastest_end"] = modes(out["jac_end"])
+    out["fastest_t0"] = modes(out["jac_t0"])[1]
+    return out
+
+
+def _state_name(unit: IbrUnit, models: dict, k: int) -> str:
+    start = 0
+    for kind, n in zip(IBR_KINDS, unit.sizes):
+        if k < start + n:
+            return f"{models[kind]} state {k - start + 1} of {n}"
+        start += n
+    return f"state {k}"
+
+
+OPEN_LOOP_NOTE = ("REECA1 QFLAG = 1 with VFLAG = 1: its Q loop sets a voltage command that its inner "
+                  "voltage loop reaches through the network; with the terminal voltage imposed that loop is "
+                  "open (two integrators in series, undamped), so the voltage step is run but not judged")
+
+
+def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], spec
+          ) -> tuple[str, list[str], dict, list[str]]:
+    """(outcome, reasons, numbers, notes) of a plant that was simulated."""
+    unit, models = st.model.unit, st.models
+    p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
+    kh = int(round(spec.held_s * spec.frame_hz))
+    dy0 = np.abs(held["dy0"])
+    k0 = int(np.argmax(dy0)) if dy0.size else 0
+    numbers = {"max_dxdt_t0": float(np.max(dy0)) if dy0.size else 0.0,
+               "max_dxdt_t0_state": _state_name(unit, models, k0),
+               "p_error_t0_pu": float(held["p_t0"] - p0), "q_error_t0_pu": float(held["q_t0"] - q0),
+               "p_error_held_pu": float(held["p"][kh] - p0), "q_error_held_pu": float(held["q"][kh] - q0)}
+    fails = []
+    if not (numbers["max_dxdt_t0"] < spec.max_derivative):
+        fails.append(f"not steady at t = 0: |d(state)/dt| = {numbers['max_dxdt_t0']:.3g} "
+                     f"({numbers['max_dxdt_t0_state']}) above {spec.max_derivative:g}")
+    if not (abs(numbers["p_error_t0_pu"]) < spec.max_derivative
+            and abs(numbers["q_error_t0_pu"]) < spec.max_derivative):
+        fails.append(f"the initial state injects P, Q off the power flow by {numbers['p_error_t0_pu']:.3g}, "
+                     f"{numbers['q_error_t0_pu']:.3g} pu: a limit binds at the start")
+    if not bool(held["ok"]):
+        fails.append("held run: the solver did not reach the end (or states became non-finite)")
+    elif not (abs(numbers["p_error_held_pu"]) < spec.max_pq_error
+              and abs(numbers["q_error_held_pu"]) < spec.max_pq_error):
+        fails.append(f"held run: P, Q at {spec.held_s:g} s differ from the power flow by "
+                     f"{numbers['p_error_held_pu']:.3g}, {numbers['q_error_held_pu']:.3g} pu "
+                     f"(limit {spec.max_pq_error:g})")
+    if fails:
+        return "fail", fails, numbers, []
+    open_loop = bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
+    notes = [OPEN_LOOP_NOTE] if open_loop else []
+    t = np.arange(len(held["p"])) / spec.frame_hz
+    after = t > spec.step_at_s
+    win = t >= t[-1] - spec.settle_window_s - 1e-9
+    why = []
+    for label, r in ((f"the {100 * spec.step:g} % voltage step", steps[0]),
+                     (f"the {F_STEP_HZ:g} Hz frequency step", steps[1])):
+        key = "vstep" if "voltage" in label else "fstep"
+        if not bool(r["ok"]):
+            why.append(f"{label}: the solver did not reach the end (or states became non-finite)")
+            continue
+        moves = []
+        if key == "vstep" and open_loop:
+            continue
+        for name, x in (("P", np.asarray(r["p"], float)), ("Q", np.asarray(r["q"], float))):
+            seen = np.concatenate([x[:1], x[after]])
+            span = float(np.max(seen) - np.min(seen))
+            band = max(spec.settle_fraction * span, spec.settle_floor_pu)
+            spread = float(np.max(np.abs(x[win] - x[-1])))
+            numbers[f"{key}_{name.lower()}_change_pu"] = float(x[-1] - x[0])
+            numbers[f"{key}_{name.lower()}_final_spread_pu"] = spread
+            if spread > band:
+                moves.append(f"{name} moves by {spread:.3g} pu over the last {spec.settle_window_s:g} s "
+                             f"(band {band:.3g} pu)")
+        dy_end = np.abs(r["dy_end"])
+        numbers[f"{key}_max_dxdt_end"] = float(np.max(dy_end)) if dy_end.size else 0.0
+        if numbers[f"{key}_max_dxdt_end"] > spec.settle_derivative:
+            k = int(np.argmax(dy_end))
+            moves.append(f"|d(state)/dt| = {numbers[f'{key}_max_dxdt_end']:.3g} at {t[-1]:g} s "
+                         f"({_state_name(unit, models, k)}; limit {spec.settle_derivative:g})")
+        growth = float(r["growth_end"])
+        numbers[f"{key}_growth_rate_end_per_s"] = growth if math.isfinite(growth) else None
+        if moves and math.isfinite(growth) and growth < 0:   # slow, and every mode decays
+            notes.append(f"{label}: still settling at {t[-1]:g} s (" + "; ".join(moves) + f"); linearised "
+                         f"there every mode decays, the slowest with a time constant of {-1.0 / growth:.3g} s")
+        elif moves:
+            grows = (f" (linearised at {t[-1]:g} s, a mode grows at {growth:.3g} 1/s)"
+                     if math.isfinite(growth) and growth > 0 else "")
+            why.append(f"{label}: not settled {t[-1] - spec.step_at_s:g} s after it: " + "; ".join(moves) + grows)
+    if why:
+        return "fail", why, numbers, notes
+    return "pass", [], numbers, notes
+
+
+__all__ = ["F_STEP_HZ", "IBR_KINDS", "IbrLane", "IbrResult", "IbrStatic", "at", "batch_jit", "ibr_static",
+           "judge", "lanes"]
