@@ -452,7 +452,7 @@ def _ibr_validation(traces: dict, p: FleetPlant, criteria: dict, dyr: DyrOutcome
     played = scores is not None
     result = ("not judged" if not played or scores.onset_s is None else "pass" if not reasons else "fail")
     return {"result": result, "model": "dyr", "scope": IBR_SCOPE + ("" if played else " (not played back)"),
-            "reasons": reasons, "channels": list(IBR_CHANNELS),
+            "reasons": reasons, "channels": list(IBR_CHANNELS), "judged_channels": list(IBR_CHANNELS),
             "windows": None if scores is None else scores.as_dict()}
 
 
