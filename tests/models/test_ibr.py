@@ -286,3 +286,24 @@ def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
     alone = ibr_model(dyr, 10, "1")
     assert alone.unit is None and any("no electrical record (REECA1)" in m for m in alone.missing)
     assert is_ibr(dyr, 8, "1") and not is_ibr(dyr, 11, "1")
+
+
+def test_vdl_tables_with_trailing_zero_points():
+    """A REECA1 record whose VDL tables use fewer than four points, the rest written (0, 0) (as
+    the Texas 7k case writes them): the used points kept, the last held beyond them; a table of
+    no used point is no limit; the plant's notes say so."""
+    from jaxdse._models.ibr import VDL_OPEN_PU, vdl_points, vdl_trailing_zeros
+
+    assert vdl_points([0.1, 0.9, 0, 0], [1.25, 1.25, 0, 0]) == ([0.1, 0.9, 1.9, 2.9], [1.25, 1.25, 1.25, 1.25])
+    assert vdl_points([0, 0, 0, 0], [0, 0, 0, 0]) == ([0.0, 1.0, 2.0, 3.0], [VDL_OPEN_PU] * 4)
+    assert vdl_points([0.2, 0.5, 1, 1.5], [1, 1, 1, 1]) == ([0.2, 0.5, 1.0, 1.5], [1.0, 1.0, 1.0, 1.0])
+    rec = DYR.strip().splitlines()
+    head = " ".join(" ".join(rec[1:3]).split())      # the REECA1 values before its VDL tables
+    text = head + " 0.1 1.25 0.9 1.25 0 0 0 0  0 0 0 0 0 0 0 0 /"
+    values = text.split()[3:-1]
+    elec = ibr_from_dyr("REECA1", values)
+    assert np.asarray(elec.vdl1_v_pu).tolist() == [0.1, 0.9, 1.9, 2.9]
+    assert float(elec.vdl2_i_pu[0]) == VDL_OPEN_PU
+    assert vdl_trailing_zeros(values) == ["VDL1 (2 points used)", "VDL2 (0 points used: no limit)"]
+    with pytest.raises(ValueError, match="Vq1..Vq4 must increase"):
+        ibr_from_dyr("REECA1", head.split()[3:] + "0.5 1 0.2 1 0 0 0 0 0 0 0 0 0 0 0 0".split())

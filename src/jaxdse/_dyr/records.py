@@ -20,7 +20,7 @@ from .._io.psse import (
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
-from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr
+from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, vdl_trailing_zeros
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .ibr_unit import IbrUnit
@@ -142,6 +142,10 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
                              "holds the initial state")
         if "plant" not in out.models:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
+        rec = next(r for r in dyr.unit_records(bus, machine_id) if r.model == out.models["electrical"])
+        for table in vdl_trailing_zeros(rec.constants) if rec.model == "REECA1" else []:
+            out.notes.append(f"REECA1: {table}: its trailing (0, 0) points read as unused, the last "
+                             "used point held beyond them")
     return out
 
 

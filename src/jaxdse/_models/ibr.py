@@ -646,6 +646,42 @@ IBR_PARAMETERS: dict[str, dict[str, str]] = {
 """Field -> PSS/E name of each model (for the record messages and a written-back record)."""
 
 
+VDL_OPEN_PU = 1e3
+"""The current ceiling [pu] of a VDL table whose points are all (0, 0): no table (Imax limits)."""
+
+
+def vdl_points(v, i) -> tuple[list[float], list[float]]:
+    """A REECA1 VDL table's four points with its trailing (0, 0) pairs read as unused, as case
+    files write a table of fewer points: the last used point is held beyond it (flat, as the
+    table is beyond its ends); a table of no used point is no limit (:data:`VDL_OPEN_PU`)."""
+    v, i = [float(x) for x in v], [float(x) for x in i]
+    n = len(v)
+    while n > 0 and v[n - 1] == 0.0 and i[n - 1] == 0.0:
+        n -= 1
+    if n == 0:
+        return [0.0, 1.0, 2.0, 3.0], [VDL_OPEN_PU] * 4
+    return (v[:n] + [v[n - 1] + k for k in range(1, 5 - n)], i[:n] + [i[n - 1]] * (4 - n))
+
+
+def vdl_trailing_zeros(constants: Sequence) -> list[str]:
+    """Which of a REECA1 record's VDL tables (its values after ``bus 'REECA1' id``) end in
+    (0, 0) pairs that :func:`vdl_points` reads as unused: "VDL1 (2 points used)", ..."""
+    names = IBR_FIELDS["REECA1"]
+    out = []
+    try:
+        vals = {c: float(x) for c, x in zip(names, constants) if c in _VDL}
+    except (TypeError, ValueError):
+        return out
+    for label, keys in (("VDL1", _VDL[:8]), ("VDL2", _VDL[8:])):
+        pairs = [(vals.get(keys[k], 1.0), vals.get(keys[k + 1], 1.0)) for k in range(0, 8, 2)]
+        n = 4
+        while n > 0 and pairs[n - 1] == (0.0, 0.0):
+            n -= 1
+        if n < 4:
+            out.append(f"{label} ({n} point{'s' if n != 1 else ''} used" + (": no limit)" if n == 0 else ")"))
+    return out
+
+
 def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
     """The module of an inverter-based resource's .dyr record: ``model`` (REGCA1, REECA1,
     REPCA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
@@ -678,8 +714,9 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
     kwargs = {f: values[con] for f, con in fields.items()}
     if name == "REECA1":
         tail = [values[c] for c in _VDL]
-        kwargs.update(vdl1_v_pu=tail[0:8:2], vdl1_i_pu=tail[1:8:2], vdl2_v_pu=tail[8:16:2],
-                      vdl2_i_pu=tail[9:16:2])
+        v1, i1 = vdl_points(tail[0:8:2], tail[1:8:2])
+        v2, i2 = vdl_points(tail[8:16:2], tail[9:16:2])
+        kwargs.update(vdl1_v_pu=v1, vdl1_i_pu=i1, vdl2_v_pu=v2, vdl2_i_pu=i2)
     if name == "REPCA1":
         kwargs["branch"] = (int(values["FROM"]), int(values["TO"]), values["CKT"])
     try:
@@ -693,7 +730,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         raise ValueError(record_message(msg, name, fields)) from None
 
 
-__all__ = ["IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+__all__ = ["VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
            "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
