@@ -237,7 +237,7 @@ def test_dyr_records_read_into_the_models(tmp_path):
     assert (elec.pfflag, elec.vflag, elec.qflag, elec.pflag, elec.pqflag) == (0, 1, 1, 0, 0)
     assert float(elec.kvi) == 40.0 and float(elec.i_max_pu) == 1.7
     np.testing.assert_allclose(elec.vdl1_v_pu, [0.2, 0.5, 1.0, 1.5])
-    assert (plant.vcflag, plant.refflag, plant.fflag, plant.branch) == (0, 1, 1, (8, 7, "1"))
+    assert (plant.vcflag, plant.refflag, plant.fflag, plant.branch.tolist()) == (0, 1, 1, [8, 7])
     assert float(plant.kp) == 18.0 and float(plant.ddn_pu) == 20.0 and float(plant.t_g_s) == 0.1
     unit = IbrUnit(conv, elec, plant)
     u = _inputs(1.02)
@@ -307,3 +307,14 @@ def test_vdl_tables_with_trailing_zero_points():
     assert vdl_trailing_zeros(values) == ["VDL1 (2 points used)", "VDL2 (0 points used: no limit)"]
     with pytest.raises(ValueError, match="Vq1..Vq4 must increase"):
         ibr_from_dyr("REECA1", head.split()[3:] + "0.5 1 0.2 1 0 0 0 0 0 0 0 0 0 0 0 0".split())
+
+
+def test_plants_on_different_buses_share_one_structure():
+    """REPCA1's bus ICONs are array leaves: two plants that differ only in their regulated bus
+    and branch have one tree structure (one compiled program for a case's plants)."""
+    rec = " ".join(DYR.strip().splitlines()[4:6]).split()[3:-1]
+    other = list(rec)
+    other[0], other[1], other[2] = "120489", "120489", "120490"
+    a, b = ibr_from_dyr("REPCA1", rec), ibr_from_dyr("REPCA1", other)
+    assert int(b.regulated_bus) == 120489 and b.branch.tolist() == [120489, 120490]
+    assert jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)

@@ -130,9 +130,9 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
         out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
                            plant=parts.get("plant"))
         plant = parts.get("plant")
-        if plant is not None and (plant.regulated_bus not in (0, bus) or plant.branch[0] != 0):
-            out.notes.append(f"REPCA1: regulated bus {plant.regulated_bus} and branch "
-                             f"{plant.branch[0]}-{plant.branch[1]} taken at the terminal")
+        if plant is not None and (int(plant.regulated_bus) not in (0, bus) or int(plant.branch[0]) != 0):
+            out.notes.append(f"REPCA1: regulated bus {int(plant.regulated_bus)} and branch "
+                             f"{int(plant.branch[0])}-{int(plant.branch[1])} taken at the terminal")
         elec = parts["electrical"]
         if float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0:
             out.notes.append(f"REECA1: Thld = {float(elec.thld_s):g}, Thld2 = {float(elec.thld2_s):g}: "

@@ -34,7 +34,7 @@ from typing import NamedTuple
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from .._base.blocks import blocked as _blocked
 from .._base.blocks import lag as _lag
@@ -49,6 +49,11 @@ LVPL_RESET_S = 1e-3
 resets the state of a non-windup limit to the limit; an ODE relaxes it, fast against Tg)."""
 V_FLOOR_PU = 0.01
 """Dividers by a filtered voltage use max(V, this) [pu] (as the WECC diagrams do)."""
+
+
+def _as_bus(x):
+    """Bus numbers as an integer array leaf (host side)."""
+    return np.asarray(x, dtype=np.int64)
 
 
 def deadband(x, lo, hi):
@@ -458,10 +463,11 @@ class REPCA1(eqx.Module):
     """RefFlag: 1 voltage control, 0 reactive power control."""
     fflag: int = eqx.field(static=True, converter=int, default=1)
     """Fflag: 1 active power control with frequency droop, 0 Pref held."""
-    regulated_bus: int = eqx.field(static=True, converter=int, default=0)
-    """IREG ICON: the regulated bus (0: terminal); taken at the terminal."""
-    branch: tuple = eqx.field(static=True, default=(0, 0, "1"))
-    """(from bus, to bus, circuit) ICONs of the monitored branch; taken at the terminal."""
+    regulated_bus: Int[Array, ""] = eqx.field(converter=_as_bus, default=0)
+    """IREG ICON: the regulated bus (0: terminal); taken at the terminal. An array leaf, not a
+    static field: plants of different buses share one compiled program."""
+    branch: Int[Array, " 2"] = eqx.field(converter=_as_bus, default=(0, 0))
+    """(from bus, to bus) ICONs of the monitored branch; taken at the terminal."""
     t_fltr_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
     """Tfltr: voltage and reactive power filter [s] (0: none)."""
     kp: Float[Array, ""] = eqx.field(converter=as_float, default=18.0)
@@ -718,7 +724,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         v2, i2 = vdl_points(tail[8:16:2], tail[9:16:2])
         kwargs.update(vdl1_v_pu=v1, vdl1_i_pu=i1, vdl2_v_pu=v2, vdl2_i_pu=i2)
     if name == "REPCA1":
-        kwargs["branch"] = (int(values["FROM"]), int(values["TO"]), values["CKT"])
+        kwargs["branch"] = (int(values["FROM"]), int(values["TO"]))
     try:
         return IBR_MODELS[name](**kwargs)
     except ValueError as err:  # name the CONs as the record does
