@@ -24,6 +24,7 @@ from .._core.identify import IdentifySettings
 from .._core.settings import Settings
 from .._core.verdict import VerdictSettings
 from .._dyr.repair import carried_lines, carried_raw_lines
+from .._dyr.records import ibr_model
 from .._io.config import GeneratorRun
 from .._io.errors import InputError
 from .._io.inertia import InertiaConfig, inertia_section
@@ -177,7 +178,10 @@ def load_fleet(path) -> Fleet:
         why = units.skip_reason()
         ibr = ibr_members(raw, dyr, bus, ids) if not units.units and not units.problems else []
         if ibr:   # an inverter-based plant: its own records only (no rotor)
-            why = None
+            missing = [line for m in ibr for line in ibr_model(dyr, bus, m.id).missing
+                       if "is not simulated" not in line]   # a model not simulated: the plant, not judged
+            why = (None if not missing else "an inverter-based plant whose records cannot be played "
+                   f"back ({missing[0]}) and which has no rotor to estimate")
         if why is None:
             try:
                 spec = measurement_section(path, {**meas, "columns": columns,
