@@ -73,7 +73,7 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator) -> IbrStatic:
             what = {"wind": "type-3 wind turbine model", None: "converter model"}.get(role, f"{role} model")
             unsupported.append((r.model, f"{record_label(r)}: {what} {r.model} is not simulated by jaxdse "
                                          f"(inverter-based models simulated: {', '.join(IBR_MODELS)})"))
-    um = ibr_model(dyr, g.bus, g.id)
+    um = ibr_model(dyr, g.bus, g.id, raw)
     problems = []
     for line in um.missing:
         if "is not simulated" in line:

@@ -148,7 +148,7 @@ def plant_model(raw, dyr, plant, options: PlaybackOptions = PlaybackOptions()) -
     inverter-based plant's own records (:func:`~jaxdse._dyr.records.ibr_model`; without a model
     for each unit the plant is not played back, ``fallback`` says why)."""
     if plant.ibr:
-        units = [ibr_model(dyr, plant.bus, m.id) for m in plant.members]
+        units = [ibr_model(dyr, plant.bus, m.id, raw) for m in plant.members]
         w_s = 2 * np.pi * raw.basfrq_hz
         for u in units:
             if u.unit is not None:

@@ -1,5 +1,5 @@
-"""An inverter-based plant's .dyr model: converter (REGCA1), electrical controls (REECA1) and an
-optional plant controller (REPCA1), driven as a machine's :class:`~jaxdse._dyr.unit.DyrUnit` is:
+"""An inverter-based plant's .dyr model: converter (REGCA1 or REGCB1), electrical controls (REECA1,
+REECB1 or REECCU1) and an optional plant controller (REPCA1), driven as a machine's :class:`~jaxdse._dyr.unit.DyrUnit` is:
 the terminal voltage phasor and the frequency deviation imposed (:class:`UnitInputs`).
 
 The state is one flat vector ``[converter | electrical | plant]``. Signal flow at one instant:
@@ -15,12 +15,16 @@ from typing import NamedTuple
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from .._base.fields import as_float
 from .._models.ibr import (
     REECA1,
+    REECB1,
+    REECCU1,
     REGCA1,
+    REGCB1,
     REPCA1,
     ElectricalInputs,
     ElectricalReferences,
@@ -69,8 +73,8 @@ class IbrSignals(NamedTuple):
 class IbrUnit(eqx.Module):
     """One inverter-based plant as its PSS/E records describe it (machine base)."""
 
-    converter: REGCA1
-    electrical: REECA1
+    converter: REGCA1 | REGCB1
+    electrical: REECA1 | REECB1 | REECCU1
     plant: REPCA1 | None = None
     omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * jnp.pi * 60.0)
     """Nominal angular frequency [rad/s]: a playback turns the recorded angle's slope into the
@@ -85,6 +89,15 @@ class IbrUnit(eqx.Module):
     @property
     def n_states(self) -> int:
         return sum(self.sizes)
+
+    @property
+    def at_rest(self) -> np.ndarray:
+        """Which states a steady state holds still (host bool array): all but REECCU1's state
+        of charge, which integrates the output power (at rest only at P = 0)."""
+        mask = np.ones(self.n_states, dtype=bool)
+        if isinstance(self.electrical, REECCU1):
+            mask[self.converter.n_states + 6] = False
+        return mask
 
     def split(self, y):
         """(converter, electrical, plant) parts of the flat state."""

@@ -8,8 +8,12 @@ caller falls back to the surrogate and says why.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Literal
+
+import equinox as eqx
+import jax.numpy as jnp
 
 from .._io.psse import (
     PSSE_GOVERNOR_MODELS,
@@ -95,11 +99,12 @@ def is_ibr(dyr: DyrData, bus: int, machine_id: str) -> bool:
     return any(r.model in PSSE_IBR_MODELS for r in dyr.unit_records(bus, machine_id))
 
 
-def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
-    """The :class:`IbrUnit` of generator (``bus``, ``machine_id``) from its REGCA1, REECA1 and
-    (optional) REPCA1 records, or why there is none (a record of a model not simulated, a
-    second record of one role, a missing converter or electrical control, a record that does
-    not read)."""
+def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = None) -> IbrModel:
+    """The :class:`IbrUnit` of generator (``bus``, ``machine_id``) from its converter (REGCA1,
+    REGCB1), electrical control (REECA1, REECB1, REECCU1) and (optional) REPCA1 records, or why
+    there is none (a record of a model not simulated, a second record of one role, a missing
+    converter or electrical control, a record that does not read). REGCB1's source impedance is
+    the generator's ZSORCE in ``raw`` (without ``raw``: none, a current source; noted)."""
     out = IbrModel(unit=None)
     parts: dict[str, object] = {}
     for rec in dyr.unit_records(bus, machine_id):
@@ -126,6 +131,19 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
         if role not in out.models:
             out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
+    if not out.missing and out.models["converter"] == "REGCB1":
+        g = next((x for x in raw.generators if x.bus == int(bus)
+                  and x.id.strip().upper() == str(machine_id).strip().upper()), None) if raw is not None else None
+        conv = parts["converter"]
+        if g is None:
+            out.notes.append("REGCB1: no generator record for its source impedance ZSORCE: a current "
+                             "source (Te not used)")
+        else:
+            parts["converter"] = eqx.tree_at(lambda c: (c.re_pu, c.xe_pu), conv,
+                                             (jnp.asarray(float(g.zr_pu)), jnp.asarray(float(g.zx_pu))))
+            if float(conv.t_e_s) > 0 and math.hypot(g.zr_pu, g.zx_pu) <= 1e-9:
+                out.notes.append(f"REGCB1: Te = {float(conv.t_e_s):g} s with ZSORCE = 0: a current source "
+                                 "(Te not used)")
     if not out.missing:
         out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
                            plant=parts.get("plant"))
@@ -134,17 +152,24 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
             out.notes.append(f"REPCA1: regulated bus {int(plant.regulated_bus)} and branch "
                              f"{int(plant.branch[0])}-{int(plant.branch[1])} taken at the terminal")
         elec = parts["electrical"]
-        if float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0:
+        name = out.models["electrical"]
+        if name == "REECA1" and (float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0):
             out.notes.append(f"REECA1: Thld = {float(elec.thld_s):g}, Thld2 = {float(elec.thld2_s):g}: "
                              "the post-dip hold timers are not modelled (taken as 0)")
-        if not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
+        if name != "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref0_pu) != 0.0:
+            out.notes.append(f"{name}: VFLAG = 0: its inner voltage loop holds |V| at the start (Vref0 = "
+                             f"{float(elec.v_ref0_pu):g} serves the dip injection only)")
+        if name == "REECCU1":
+            out.notes.append(f"REECCU1: the state of charge (SOCini = {float(elec.soc_ini_pu):g}) integrates "
+                             "-Pe/T: it moves in a held run, P and Q do not")
+        if name == "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
             out.notes.append(f"REECA1: Vref1 = {float(elec.v_ref1_pu):g} replaced by the value that "
                              "holds the initial state")
         if "plant" not in out.models:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
         rec = next(r for r in dyr.unit_records(bus, machine_id) if r.model == out.models["electrical"])
-        for table in vdl_trailing_zeros(rec.constants) if rec.model == "REECA1" else []:
-            out.notes.append(f"REECA1: {table}: its trailing (0, 0) points read as unused, the last "
+        for table in vdl_trailing_zeros(rec.constants, rec.model) if rec.model in ("REECA1", "REECCU1") else []:
+            out.notes.append(f"{rec.model}: {table}: its trailing (0, 0) points read as unused, the last "
                              "used point held beyond them")
     return out
 

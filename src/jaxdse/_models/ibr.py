@@ -167,6 +167,116 @@ class REGCA1(eqx.Module):
         return jnp.stack([ip, iq, jnp.asarray(vt, float) + 0.0 * ip]), ip, iq
 
 
+class REGCB1(eqx.Module):
+    """PSS/E REGCB1 (WECC REGC_B), the generator/converter interface with its current control
+    and a voltage source behind the source impedance.
+
+    Block diagram (WECC REMTF, *REGC_B model specification*; PSS/E Model Library "REGCB1"):
+
+        (Ipc, Iqc) = current limit of (Ipcmd, Iqcmd): PQFlag = 0 Iqc = clip(Iqcmd, -Imax, Imax),
+                     Ipc within +-sqrt(Imax^2 - Iqc^2); PQFlag = 1 the other way round
+        Vf  = 1/(1 + s Tfltr) |V|  (floor 0.01)
+        RateFlag = 0: Ip = 1/(1 + s Tg) Ipc;      RateFlag = 1: Ip = [1/(1 + s Tg) (Ipc Vf)] / Vf
+                      the rate of the lag within Rrpwr in the direction of the command's sign
+        Iq  = 1/(1 + s Tg) Iqc, rate within [Iqrmin, Iqrmax]
+        E   = 1/(1 + s Te) (V + Zs (Ip - j Iq)),   I_out = (E - V) / Zs   (terminal voltage frame)
+
+    Zs = Re + j Xe is the generator's source impedance (the .raw ZSORCE on MBASE). With Te = 0
+    or Zs = 0 the converter is the current source (Ip, Iq). States: [Ip (P when RateFlag = 1), Iq,
+    Vf, Ed, Eq]; E is held in the frame of the terminal voltage (its angle's motion is not fed
+    back into E). No LVPL, LVACM or HVRCM (REGC_B has none).
+    """
+
+    rateflag: int = eqx.field(static=True, converter=int, default=0)
+    """RateFlag (ICON): 0 the Rrpwr rate acts on the active current, 1 on the active power."""
+    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    """PQFlag (ICON): current limit priority, 0 reactive, 1 active."""
+    t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tg: current control time constant [s] (> 0)."""
+    t_fltr_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tfltr: terminal voltage filter [s] (0: none)."""
+    iqrmax_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
+    """Iqrmax: up rate of the reactive current [pu/s] (> 0)."""
+    iqrmin_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
+    """Iqrmin: down rate of the reactive current [pu/s] (< 0)."""
+    rrpwr_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """Rrpwr: ramp rate of the active current (or power) [pu/s] (> 0)."""
+    t_e_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Te: voltage source time constant [s] (0: current source)."""
+    i_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.6)
+    """Imax: converter current limit [pu] (> 0)."""
+    re_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Re: source resistance [pu on MBASE] (the generator's ZSORCE, not a CON)."""
+    xe_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Xe: source reactance [pu on MBASE] (the generator's ZSORCE, not a CON)."""
+
+    n_states = 5
+
+    def __check_init__(self):
+        for name in ("rateflag", "pqflag"):
+            if getattr(self, name) not in (0, 1):
+                raise ValueError(f"REGCB1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_positive(self, "t_g_s", "rrpwr_pu_s", "iqrmax_pu_s", "i_max_pu")
+        check_nonnegative(self, "t_fltr_s", "t_e_s")
+        if all_concrete(self.iqrmin_pu_s):
+            check_that(self, self.iqrmin_pu_s < 0, f"Iqrmin must be < 0, got {self.iqrmin_pu_s}")
+
+    def _source(self):
+        """(on, Zs): whether the voltage source lag acts, and Zs (1 where it does not)."""
+        z = self.re_pu + 1j * self.xe_pu
+        on = (self.t_e_s > 0) & (jnp.abs(z) > 1e-9)
+        return on, jnp.where(on, z, 1.0 + 0j)
+
+    def _currents(self, state):
+        """(Ip, Iq) of the current control lags [pu]."""
+        vf = jnp.maximum(state[2], V_FLOOR_PU)
+        ip = state[0] / vf if self.rateflag else state[0]
+        return ip, state[1]
+
+    def limit(self, ipcmd, iqcmd):
+        """(Ipc, Iqc): the commands within Imax, by PQFlag's priority."""
+        room = lambda x: jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - x ** 2, 0.0))  # noqa: E731
+        if self.pqflag:
+            ipc = jnp.clip(ipcmd, -self.i_max_pu, self.i_max_pu)
+            return ipc, jnp.clip(iqcmd, -room(ipc), room(ipc))
+        iqc = jnp.clip(iqcmd, -self.i_max_pu, self.i_max_pu)
+        return jnp.clip(ipcmd, -room(iqc), room(iqc)), iqc
+
+    def injection(self, state, vt):
+        """(Ip_inj, Iq_inj) [pu current]: the currents the converter injects at |V| = ``vt``."""
+        ip, iq = self._currents(state)
+        on, z = self._source()
+        i_out = (state[3] + 1j * state[4] - vt) / z
+        return jnp.where(on, i_out.real, ip), jnp.where(on, -i_out.imag, iq)
+
+    def vector_field(self, state, vt, ipcmd, iqcmd):
+        """d[Ip, Iq, Vf, Ed, Eq]/dt at |V| = ``vt`` [pu] with the commands Ipcmd, Iqcmd [pu]."""
+        ipc, iqc = self.limit(ipcmd, iqcmd)
+        vf = jnp.maximum(state[2], V_FLOOR_PU)
+        target = ipc * vf if self.rateflag else ipc
+        d_ip = (target - state[0]) / self.t_g_s
+        d_ip = jnp.where(target >= 0, jnp.minimum(d_ip, self.rrpwr_pu_s), jnp.maximum(d_ip, -self.rrpwr_pu_s))
+        d_iq = jnp.clip((iqc - state[1]) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
+        _, d_vf = _lag(vt, state[2], self.t_fltr_s)
+        ip, iq = self._currents(state)
+        on, z = self._source()
+        e = vt + z * (ip - 1j * iq)
+        te = jnp.where(on, self.t_e_s, 1.0)
+        d_ed = jnp.where(on, (e.real - state[3]) / te, 0.0)
+        d_eq = jnp.where(on, (e.imag - state[4]) / te, 0.0)
+        return jnp.stack([d_ip, d_iq, d_vf, d_ed, d_eq])
+
+    def initial_state(self, vt, p, q):
+        """(state, Ipcmd, Iqcmd): the steady state injecting P = ``p``, Q = ``q`` [pu] at |V| =
+        ``vt`` (|I| within Imax)."""
+        vt = jnp.asarray(vt, float)
+        ip, iq = p / vt, q / vt
+        _, z = self._source()
+        e = vt + z * (ip - 1j * iq)
+        x_p = ip * vt if self.rateflag else ip
+        return jnp.stack([x_p, iq, vt + 0.0 * ip, e.real, e.imag]), ip, iq
+
+
 # --- REECA1 -----------------------------------------------------------------------------------
 
 class ElectricalInputs(NamedTuple):
@@ -197,7 +307,107 @@ class ElectricalReferences(NamedTuple):
     """Power factor angle reference [rad] (PFFLAG = 1): atan(Q0/P0)."""
 
 
-class REECA1(eqx.Module):
+class _ElectricalControls(eqx.Module):
+    """The REEC_A/B/C signal path shared by REECA1, REECB1 and REECCU1 (methods only; each model
+    holds its own fields and says, through the hooks below, where it differs): the voltage
+    filter and dip freeze, the Q and V PI loops, the Tiq lag, the power order and the current
+    limit logic, as in :class:`REECA1`'s docstring. Hooks: ``_tables(vm)`` (VDL1, VDL2 ceilings),
+    ``_v_alt(q_c, refs)`` (the inner loop's reference with VFLAG = 0), ``_p_in(u)`` (the power
+    order's input), ``_ip_floor(ip_max)`` (the lower active current limit), ``_p_limits(state)``
+    (the power order's limits), ``_extra(state, u)`` (derivatives of states after the six)."""
+
+    def _freeze(self, vt):
+        return (vt < self.vdip_pu) | (vt > self.vup_pu)
+
+    def _ip_floor(self, ip_max):
+        return jnp.zeros_like(ip_max)
+
+    def _p_limits(self, state):
+        return self.p_min_pu, self.p_max_pu
+
+    def _extra(self, state, u: ElectricalInputs):
+        return []
+
+    def commands(self, state, u: ElectricalInputs, refs: ElectricalReferences):
+        """(Ipcmd, Iqcmd, dip, internals): the current commands [pu] at ``state``; ``internals``
+        (the PI errors and outputs) serve the vector field."""
+        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
+        vm, _ = _lag(u.vt_pu, vm, self.t_rv_s)
+        pm, _ = _lag(u.p_pu, pm, self.t_p_s)
+        dip = self._freeze(u.vt_pu)
+        v_safe = jnp.maximum(vm, V_FLOOR_PU)
+        iqv = jnp.clip(self.kqv * deadband(refs.v_ref0_pu - vm, self.dbd1_pu, self.dbd2_pu),
+                       self.iql1_pu, self.iqh1_pu)
+        q_ref = pm * jnp.tan(refs.pfaref_rad) if self.pfflag else u.q_ext_pu
+        q_c = jnp.clip(q_ref, self.q_min_pu, self.q_max_pu)
+        e_q = q_c - u.q_pu
+        vq_raw = self.kqp * e_q + x_q
+        vq = jnp.clip(vq_raw, self.v_min_pu, self.v_max_pu)
+        v_sel = vq if self.vflag else self._v_alt(q_c, refs)
+        e_v = v_sel - vm
+        iv0, _ = _lag(q_c / v_safe, x_iq, self.t_iq_s)
+        p_lo, p_hi = self._p_limits(state)
+        pord_out = jnp.clip(jnp.where(self.t_pord_s > 0, pord, self._p_in(u)), p_lo, p_hi)
+        ip_raw = pord_out / v_safe
+        vdl1, vdl2 = self._tables(vm)
+        if self.pqflag:
+            ip_max = jnp.minimum(vdl2, self.i_max_pu)
+            ipcmd = jnp.clip(ip_raw, self._ip_floor(ip_max), ip_max)
+            iq_max = jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd ** 2, 1e-12)))
+        else:
+            iq_max = jnp.minimum(vdl1, self.i_max_pu)
+        iqb_raw = self.kvp * e_v + x_v
+        iqb = jnp.clip(iqb_raw, -iq_max, iq_max)
+        iqcmd = jnp.clip((iqb if self.qflag else iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
+        if not self.pqflag:
+            ip_max = jnp.minimum(vdl2, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - iqcmd ** 2, 1e-12)))
+            ipcmd = jnp.clip(ip_raw, self._ip_floor(ip_max), ip_max)
+        return ipcmd, iqcmd, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max)
+
+    def vector_field(self, state, u: ElectricalInputs, refs: ElectricalReferences):
+        """d(state)/dt."""
+        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
+        _, d_vm = _lag(u.vt_pu, vm, self.t_rv_s)
+        _, d_pm = _lag(u.p_pu, pm, self.t_p_s)
+        _, _, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max) = self.commands(state, u, refs)
+        run = 1.0 - dip.astype(state.dtype)
+        d_q = run * _blocked(vq_raw, self.kqi * e_q, self.v_min_pu, self.v_max_pu)
+        d_v = run * _blocked(iqb_raw, self.kvi * e_v, -iq_max, iq_max)
+        v_safe = jnp.maximum(jnp.where(self.t_rv_s > 0, vm, u.vt_pu), V_FLOOR_PU)
+        _, d_iq = _lag(q_c / v_safe, x_iq, self.t_iq_s)
+        on = self.t_pord_s > 0
+        p_lo, p_hi = self._p_limits(state)
+        d_p = jnp.clip((self._p_in(u) - pord) / jnp.where(on, self.t_pord_s, 1.0),
+                       self.dp_min_pu_s, self.dp_max_pu_s)
+        d_p = jnp.where(on, _blocked(pord, d_p, p_lo, p_hi), 0.0)
+        if not self.qflag:
+            d_q, d_v = d_q * 0.0, d_v * 0.0      # the PI loops are not in the signal path
+        return jnp.stack([d_vm, d_pm, d_q, d_v, run * d_iq, run * d_p, *self._extra(state, u)])
+
+    def _extra_state(self, vt):
+        return []
+
+    def initial_state(self, vt, p, q, ipcmd, iqcmd):
+        """(state, ElectricalReferences, Pref, Qext): the steady state that issues the commands
+        ``ipcmd``, ``iqcmd`` [pu] at |V| = ``vt``, P = ``p``, Q = ``q``, and the references
+        (Pref, and Qext for PFFLAG = 0) that hold it. Assumes no limit active, no dip."""
+        vt = jnp.asarray(vt, float)
+        v_ref0 = jnp.where(self.v_ref0_pu == 0.0, vt, self.v_ref0_pu)
+        pfaref = jnp.arctan2(q, p) if self.pfflag else jnp.zeros_like(vt)
+        p_ref = ipcmd * vt                      # Pord = Ipcmd Vm: the order that gives Ipcmd
+        q_ext = q
+        q_c = jnp.clip(q, self.q_min_pu, self.q_max_pu)
+        v_ref1 = self._v_ref1(vt, q_c)
+        x_q = vt + 0.0 * q                      # PI_Q output = Vm (e_q = 0)
+        x_v = iqcmd + 0.0 * vt                  # PI_V output = Iqcmd (e_v = 0)
+        x_iq = q_c / jnp.maximum(vt, V_FLOOR_PU)
+        pord = p_ref                            # speed 1 at the start (PFLAG = 1)
+        state = jnp.stack([vt, jnp.asarray(p, float) + 0.0 * vt, x_q, x_v, x_iq, pord,
+                           *self._extra_state(vt)])
+        return state, ElectricalReferences(v_ref0, v_ref1, pfaref), p_ref, q_ext
+
+
+class REECA1(_ElectricalControls):
     """PSS/E REECA1 (WECC REEC_A), the electrical controls of a renewable plant.
 
     Block diagram (WECC REEC_A; PSS/E Model Library "REECA1"), with Vt the terminal voltage:
@@ -328,84 +538,201 @@ class REECA1(eqx.Module):
                 check_that(self, np.all(np.diff(np.asarray(v)) > 0),
                            f"{what} must increase, got {np.asarray(v).tolist()}")
 
-    def _freeze(self, vt):
-        return (vt < self.vdip_pu) | (vt > self.vup_pu)
+    def _tables(self, vm):
+        return (jnp.interp(vm, self.vdl1_v_pu, self.vdl1_i_pu),
+                jnp.interp(vm, self.vdl2_v_pu, self.vdl2_i_pu))
 
-    def commands(self, state, u: ElectricalInputs, refs: ElectricalReferences):
-        """(Ipcmd, Iqcmd, dip, internals): the current commands [pu] at ``state``; ``internals``
-        (the PI errors and outputs) serve the vector field."""
-        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
-        vm, _ = _lag(u.vt_pu, vm, self.t_rv_s)
-        pm, _ = _lag(u.p_pu, pm, self.t_p_s)
-        dip = self._freeze(u.vt_pu)
-        v_safe = jnp.maximum(vm, V_FLOOR_PU)
-        iqv = jnp.clip(self.kqv * deadband(refs.v_ref0_pu - vm, self.dbd1_pu, self.dbd2_pu),
-                       self.iql1_pu, self.iqh1_pu)
-        q_ref = pm * jnp.tan(refs.pfaref_rad) if self.pfflag else u.q_ext_pu
-        q_c = jnp.clip(q_ref, self.q_min_pu, self.q_max_pu)
-        e_q = q_c - u.q_pu
-        vq_raw = self.kqp * e_q + x_q
-        vq = jnp.clip(vq_raw, self.v_min_pu, self.v_max_pu)
-        v_sel = vq if self.vflag else q_c + refs.v_ref1_pu
-        e_v = v_sel - vm
-        iv0, _ = _lag(q_c / v_safe, x_iq, self.t_iq_s)
-        pord_out = jnp.clip(jnp.where(self.t_pord_s > 0, pord, self._p_in(u)), self.p_min_pu, self.p_max_pu)
-        ip_raw = pord_out / v_safe
-        vdl1 = jnp.interp(vm, self.vdl1_v_pu, self.vdl1_i_pu)
-        vdl2 = jnp.interp(vm, self.vdl2_v_pu, self.vdl2_i_pu)
-        if self.pqflag:
-            ip_max = jnp.minimum(vdl2, self.i_max_pu)
-            ipcmd = jnp.clip(ip_raw, 0.0, ip_max)
-            iq_max = jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd ** 2, 1e-12)))
-        else:
-            iq_max = jnp.minimum(vdl1, self.i_max_pu)
-        iqb_raw = self.kvp * e_v + x_v
-        iqb = jnp.clip(iqb_raw, -iq_max, iq_max)
-        iqcmd = jnp.clip((iqb if self.qflag else iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
-        if not self.pqflag:
-            ip_max = jnp.minimum(vdl2, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - iqcmd ** 2, 1e-12)))
-            ipcmd = jnp.clip(ip_raw, 0.0, ip_max)
-        return ipcmd, iqcmd, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max)
+    def _v_alt(self, q_c, refs: ElectricalReferences):
+        return q_c + refs.v_ref1_pu
 
     def _p_in(self, u: ElectricalInputs):
         return u.p_ref_pu * u.speed_pu if self.pflag else u.p_ref_pu
 
-    def vector_field(self, state, u: ElectricalInputs, refs: ElectricalReferences):
-        """d(state)/dt."""
-        vm, pm, x_q, x_v, x_iq, pord = (state[k] for k in range(6))
-        _, d_vm = _lag(u.vt_pu, vm, self.t_rv_s)
-        _, d_pm = _lag(u.p_pu, pm, self.t_p_s)
-        _, _, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max) = self.commands(state, u, refs)
-        run = 1.0 - dip.astype(state.dtype)
-        d_q = run * _blocked(vq_raw, self.kqi * e_q, self.v_min_pu, self.v_max_pu)
-        d_v = run * _blocked(iqb_raw, self.kvi * e_v, -iq_max, iq_max)
-        v_safe = jnp.maximum(jnp.where(self.t_rv_s > 0, vm, u.vt_pu), V_FLOOR_PU)
-        _, d_iq = _lag(q_c / v_safe, x_iq, self.t_iq_s)
-        on = self.t_pord_s > 0
-        d_p = jnp.clip((self._p_in(u) - pord) / jnp.where(on, self.t_pord_s, 1.0),
-                       self.dp_min_pu_s, self.dp_max_pu_s)
-        d_p = jnp.where(on, _blocked(pord, d_p, self.p_min_pu, self.p_max_pu), 0.0)
-        if not self.qflag:
-            d_q, d_v = d_q * 0.0, d_v * 0.0      # the PI loops are not in the signal path
-        return jnp.stack([d_vm, d_pm, d_q, d_v, run * d_iq, run * d_p])
+    def _v_ref1(self, vt, q_c):
+        return vt - q_c                         # VFLAG = 0: Vsel = Qc + Vref1 = Vm
 
-    def initial_state(self, vt, p, q, ipcmd, iqcmd):
-        """(state, ElectricalReferences, Pref, Qext): the steady state that issues the commands
-        ``ipcmd``, ``iqcmd`` [pu] at |V| = ``vt``, P = ``p``, Q = ``q``, and the references
-        (Pref, and Qext for PFFLAG = 0) that hold it. Assumes no limit active, no dip."""
-        vt = jnp.asarray(vt, float)
-        v_ref0 = jnp.where(self.v_ref0_pu == 0.0, vt, self.v_ref0_pu)
-        pfaref = jnp.arctan2(q, p) if self.pfflag else jnp.zeros_like(vt)
-        p_ref = ipcmd * vt                      # Pord = Ipcmd Vm: the order that gives Ipcmd
-        q_ext = q
-        q_c = jnp.clip(q, self.q_min_pu, self.q_max_pu)
-        v_ref1 = vt - q_c                       # VFLAG = 0: Vsel = Qc + Vref1 = Vm
-        x_q = vt + 0.0 * q                      # PI_Q output = Vm (e_q = 0)
-        x_v = iqcmd + 0.0 * vt                  # PI_V output = Iqcmd (e_v = 0)
-        x_iq = q_c / jnp.maximum(vt, V_FLOOR_PU)
-        pord = p_ref                            # speed 1 at the start (PFLAG = 1)
-        state = jnp.stack([vt, jnp.asarray(p, float) + 0.0 * vt, x_q, x_v, x_iq, pord])
-        return state, ElectricalReferences(v_ref0, v_ref1, pfaref), p_ref, q_ext
+
+class REECB1(_ElectricalControls):
+    """PSS/E REECB1 (WECC REEC_B), the electrical controls of a photovoltaic plant.
+
+    Block diagram (WECC REMTF, *Solar Photovoltaic Power Plant Modeling and Validation
+    Guideline*, REEC_B; PSS/E Model Library "REECB1"): :class:`REECA1`'s signal path without its
+    VDL tables, speed input (PFLAG) and post-dip hold timers, and with the voltage reference
+    Vref0 serving the inner voltage loop when VFLAG = 0:
+
+        Vsel = Vq if VFLAG else clip(Vref0, VMIN, VMAX)
+        PQFLAG = 0: Iqmax = Imax, Ipmax = sqrt(Imax^2 - Iqcmd^2);  PQFLAG = 1: Ipmax = Imax,
+        Iqmax = sqrt(Imax^2 - Ipcmd^2);  Ipcmd in [0, Ipmax], Iqcmd in [-Iqmax, Iqmax]
+
+    and the rest as REECA1 (dip freeze of the PI integrators, of the Tiq lag and of the power
+    order while Vt < Vdip or Vt > Vup; injection Kqv db(Vref0 - Vm) within [Iql1, Iqh1] during
+    the dip). States: [Vm, Pm, PI_Q integrator, PI_V integrator, Iqv0 lag, Pord]. With VFLAG = 0
+    the inner loop's reference is |V| at the start (``ElectricalReferences.v_ref1_pu``): a
+    record's Vref0 that differs from it would move the start (the plant notes say so).
+    """
+
+    pfflag: int = eqx.field(static=True, converter=int, default=0)
+    """PFFLAG: 1 constant power factor (Qref = Pe tan(pfaref)), 0 Q from Qext."""
+    vflag: int = eqx.field(static=True, converter=int, default=1)
+    """VFLAG: 1 Q control (the PI_Q output is the voltage loop's reference), 0 voltage control."""
+    qflag: int = eqx.field(static=True, converter=int, default=0)
+    """QFLAG: 1 voltage/Q control through the PI loops, 0 constant Q (Iq = Qref/V)."""
+    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    """PQFLAG: current limit priority, 0 reactive, 1 active."""
+    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal."""
+    vdip_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """Vdip: voltage below which the dip logic acts [pu]."""
+    vup_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.1)
+    """Vup: voltage above which the dip logic acts [pu] (> Vdip)."""
+    t_rv_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Trv: terminal voltage filter [s] (0: none)."""
+    dbd1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.05)
+    """dbd1: lower edge of the voltage error deadband [pu] (<= 0)."""
+    dbd2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """dbd2: upper edge of the voltage error deadband [pu] (>= 0)."""
+    kqv: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """Kqv: reactive current injection gain in a dip [pu current / pu voltage]."""
+    iqh1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.05)
+    """Iqh1: upper limit of the injection [pu current]."""
+    iql1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-1.05)
+    """Iql1: lower limit of the injection [pu current]."""
+    v_ref0_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Vref0: reference of the injection's voltage error [pu] (0: the initial |V|)."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Tp: electrical power filter [s] (0: none)."""
+    q_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.436)
+    """QMax: reactive power reference ceiling [pu]."""
+    q_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.436)
+    """QMin: reactive power reference floor [pu]."""
+    v_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.1)
+    """VMAX: upper limit of the PI_Q output and of the VFLAG = 0 reference [pu]."""
+    v_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """VMIN: lower limit of the PI_Q output and of the VFLAG = 0 reference [pu]."""
+    kqp: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kqp: PI_Q proportional gain [pu/pu]."""
+    kqi: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """Kqi: PI_Q integral gain [pu/pu/s]."""
+    kvp: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kvp: PI_V proportional gain [pu/pu]."""
+    kvi: Float[Array, ""] = eqx.field(converter=as_float, default=40.0)
+    """Kvi: PI_V integral gain [pu/pu/s]."""
+    t_iq_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tiq: reactive current command lag (QFLAG = 0) [s] (0: none)."""
+    dp_max_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=99.0)
+    """dPmax: up rate of the power order [pu/s] (> 0)."""
+    dp_min_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-99.0)
+    """dPmin: down rate of the power order [pu/s] (< 0)."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """PMAX: power order ceiling [pu]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """PMIN: power order floor [pu]."""
+    i_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.7)
+    """Imax: converter current limit [pu] (> 0)."""
+    t_pord_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Tpord: power order lag [s] (0: none)."""
+
+    n_states = 6
+    pflag = 0
+    """No speed input (REEC_B): Pref reaches the power order as it is."""
+
+    def __check_init__(self):
+        name = type(self).__name__
+        for flag in ("pfflag", "vflag", "qflag", "pqflag"):
+            if getattr(self, flag) not in (0, 1):
+                raise ValueError(f"{name}.{flag} must be 0 or 1, got {getattr(self, flag)}")
+        check_positive(self, "dp_max_pu_s", "i_max_pu")
+        check_nonnegative(self, "t_rv_s", "t_p_s", "t_iq_s", "t_pord_s", "kqi", "kvi")
+        if all_concrete(self.vdip_pu, self.vup_pu, self.dbd1_pu, self.dbd2_pu, self.q_max_pu,
+                        self.v_max_pu, self.p_max_pu, self.dp_min_pu_s):
+            check_that(self, self.vup_pu > self.vdip_pu,
+                       f"Vup ({self.vup_pu}) must be > Vdip ({self.vdip_pu})")
+            check_that(self, (self.dbd1_pu <= 0) & (self.dbd2_pu >= 0),
+                       f"dbd1 ({self.dbd1_pu}) must be <= 0 <= dbd2 ({self.dbd2_pu})")
+            check_that(self, self.q_max_pu >= self.q_min_pu,
+                       f"QMax ({self.q_max_pu}) must be >= QMin ({self.q_min_pu})")
+            check_that(self, self.v_max_pu >= self.v_min_pu,
+                       f"VMAX ({self.v_max_pu}) must be >= VMIN ({self.v_min_pu})")
+            check_that(self, self.p_max_pu >= self.p_min_pu,
+                       f"PMAX ({self.p_max_pu}) must be >= PMIN ({self.p_min_pu})")
+            check_that(self, self.dp_min_pu_s < 0, f"dPmin must be < 0, got {self.dp_min_pu_s}")
+
+    def _tables(self, vm):
+        return jnp.full_like(vm, VDL_OPEN_PU), jnp.full_like(vm, VDL_OPEN_PU)
+
+    def _v_alt(self, q_c, refs: ElectricalReferences):
+        return jnp.clip(refs.v_ref1_pu, self.v_min_pu, self.v_max_pu) + 0.0 * q_c
+
+    def _p_in(self, u: ElectricalInputs):
+        return u.p_ref_pu
+
+    def _v_ref1(self, vt, q_c):
+        return vt + 0.0 * q_c                   # VFLAG = 0: the inner loop holds |V| at the start
+
+
+class REECCU1(REECB1):
+    """PSS/E REECCU1 (WECC REEC_C), the electrical controls of a battery energy storage plant.
+
+    Block diagram (WECC REMTF, REEC_C in the *Battery Storage Dynamic Modeling Guideline*;
+    PSS/E Model Library "REECCU1"): :class:`REECB1` with the VDL1/VDL2 tables of
+    :class:`REECA1` on Iqmax and Ipmax, a negative active current allowed (charging: Ipcmd in
+    [-Ipmax, Ipmax], PMIN < 0), and the state of charge
+
+        d SOC/dt = -Pe / T,  SOC(0) = SOCini          (T: discharge time at 1 pu power [s])
+        SOC >= SOCmax: the power order floor PMIN raised to 0 (no more charging)
+        SOC <= SOCmin: the power order ceiling PMAX lowered to 0 (no more discharging)
+
+    States: REECB1's six, then SOC [pu]. SOC is an integrator of the output power: it is at rest
+    only at P = 0, so a held run at P0 != 0 lets it drift by -P0 t / T (P and Q stay held while
+    SOC stays inside its limits). The auxiliary power input Paux is 0.
+    """
+
+    vdl1_v_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.2, 0.5, 1.0, 1.5))
+    """Vq1..Vq4: voltages of the VDL1 table [pu] (increasing)."""
+    vdl1_i_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(1.5, 1.5, 1.5, 1.5))
+    """Iq1..Iq4: reactive current ceilings of the VDL1 table [pu]."""
+    vdl2_v_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.2, 0.5, 1.0, 1.5))
+    """Vp1..Vp4: voltages of the VDL2 table [pu] (increasing)."""
+    vdl2_i_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(1.5, 1.5, 1.5, 1.5))
+    """Ip1..Ip4: active current ceilings of the VDL2 table [pu]."""
+    t_soc_s: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
+    """T: discharge time of the battery at 1 pu power [s] (> 0)."""
+    soc_ini_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """SOCini: initial state of charge [pu]."""
+    soc_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.8)
+    """SOCmax: state of charge above which charging stops [pu]."""
+    soc_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """SOCmin: state of charge below which discharging stops [pu] (<= SOCmax)."""
+
+    n_states = 7
+
+    def __check_init__(self):
+        check_positive(self, "t_soc_s")
+        check_nonnegative(self, "vdl1_i_pu", "vdl2_i_pu")
+        if all_concrete(self.soc_min_pu, self.soc_max_pu, self.vdl1_v_pu, self.vdl2_v_pu):
+            check_that(self, self.soc_max_pu >= self.soc_min_pu,
+                       f"SOCmax ({self.soc_max_pu}) must be >= SOCmin ({self.soc_min_pu})")
+            for v, what in ((self.vdl1_v_pu, "Vq1..Vq4"), (self.vdl2_v_pu, "Vp1..Vp4")):
+                check_that(self, np.all(np.diff(np.asarray(v)) > 0),
+                           f"{what} must increase, got {np.asarray(v).tolist()}")
+
+    def _tables(self, vm):
+        return (jnp.interp(vm, self.vdl1_v_pu, self.vdl1_i_pu),
+                jnp.interp(vm, self.vdl2_v_pu, self.vdl2_i_pu))
+
+    def _ip_floor(self, ip_max):
+        return -ip_max
+
+    def _p_limits(self, state):
+        soc = state[6]
+        return (jnp.where(soc >= self.soc_max_pu, jnp.maximum(self.p_min_pu, 0.0), self.p_min_pu),
+                jnp.where(soc <= self.soc_min_pu, jnp.minimum(self.p_max_pu, 0.0), self.p_max_pu))
+
+    def _extra(self, state, u: ElectricalInputs):
+        return [-u.p_pu / self.t_soc_s]
+
+    def _extra_state(self, vt):
+        return [self.soc_ini_pu + 0.0 * vt]
 
 
 # --- REPCA1 -----------------------------------------------------------------------------------
@@ -603,14 +930,21 @@ class REPCA1(eqx.Module):
 
 # --- PSS/E records ----------------------------------------------------------------------------
 
-IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REECA1": REECA1, "REPCA1": REPCA1}
+IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REGCB1": REGCB1, "REECA1": REECA1,
+                                            "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1}
 """The inverter-based resource models by their PSS/E name."""
 
-IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REECA1": "electrical", "REPCA1": "plant"}
+IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REGCB1": "converter", "REECA1": "electrical",
+                             "REECB1": "electrical", "REECCU1": "electrical", "REPCA1": "plant"}
 """What each model is in a plant: the converter, its electrical controls, the plant controller."""
 
 _VDL = ("Vq1", "Iq1", "Vq2", "Iq2", "Vq3", "Iq3", "Vq4", "Iq4",
         "Vp1", "Ip1", "Vp2", "Ip2", "Vp3", "Ip3", "Vp4", "Ip4")
+
+_REECB1_FIELDS = ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PQFLAG",
+                  "Vdip", "Vup", "Trv", "dbd1", "dbd2", "Kqv", "Iqh1", "Iql1", "Vref0", "Tp", "QMax",
+                  "QMin", "VMAX", "VMIN", "Kqp", "Kqi", "Kvp", "Kvi", "Tiq", "dPmax", "dPmin", "PMAX",
+                  "PMIN", "Imax", "Tpord")
 
 IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw", "Tg", "Rrpwr", "Brkpt", "Zerox", "Lvpl1", "Volim", "Lvpnt1", "Lvpnt0",
@@ -623,14 +957,23 @@ IBR_FIELDS: dict[str, tuple[str, ...]] = {
                "Tfltr", "Kp", "Ki", "Tft", "Tfv", "Vfrz", "Rc", "Xc", "Kc", "emax", "emin",
                "dbd1", "dbd2", "Qmax", "Qmin", "Kpg", "Kig", "Tp", "fdbd1", "fdbd2", "femax",
                "femin", "Pmax", "Pmin", "Tg", "Ddn", "Dup"),
+    "REGCB1": ("RateFlag", "PQFlag", "Tg", "Tfltr", "Iqrmax", "Iqrmin", "Rrpwr", "Te", "Imax"),
+    "REECB1": _REECB1_FIELDS,
+    "REECCU1": (*_REECB1_FIELDS, *_VDL, "T", "SOCini", "SOCmax", "SOCmin"),
 }
 """PSS/E names of each record's values after ``bus 'MODEL' id``, ICONs first, in PSS/E order
 (Siemens PTI, PSS/E Model Library)."""
 
 IBR_ICONS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw",), "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG"),
-    "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag")}
+    "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag"),
+    "REGCB1": ("RateFlag", "PQFlag"), "REECB1": _REECB1_FIELDS[:5], "REECCU1": _REECB1_FIELDS[:5]}
 """The integer ICONs of each record (REPCA1's CKT is a circuit identifier, kept as text)."""
+
+_REECB1_PARAMS = ("remote_bus", "pfflag", "vflag", "qflag", "pqflag", "vdip_pu", "vup_pu", "t_rv_s",
+                  "dbd1_pu", "dbd2_pu", "kqv", "iqh1_pu", "iql1_pu", "v_ref0_pu", "t_p_s", "q_max_pu",
+                  "q_min_pu", "v_max_pu", "v_min_pu", "kqp", "kqi", "kvp", "kvi", "t_iq_s",
+                  "dp_max_pu_s", "dp_min_pu_s", "p_max_pu", "p_min_pu", "i_max_pu", "t_pord_s")
 
 IBR_PARAMETERS: dict[str, dict[str, str]] = {
     "REGCA1": dict(zip(("lvplsw", "t_g_s", "rrpwr_pu_s", "brkpt_pu", "zerox_pu", "lvpl1_pu",
@@ -648,6 +991,11 @@ IBR_PARAMETERS: dict[str, dict[str, str]] = {
                         "t_p_s", "fdbd1_pu", "fdbd2_pu", "fe_max_pu", "fe_min_pu", "p_max_pu",
                         "p_min_pu", "t_g_s", "ddn_pu", "dup_pu"),
                        ("IREG", "VCFlag", "RefFlag", "Fflag", *IBR_FIELDS["REPCA1"][7:]))),
+    "REGCB1": dict(zip(("rateflag", "pqflag", "t_g_s", "t_fltr_s", "iqrmax_pu_s", "iqrmin_pu_s",
+                        "rrpwr_pu_s", "t_e_s", "i_max_pu"), IBR_FIELDS["REGCB1"])),
+    "REECB1": dict(zip(_REECB1_PARAMS, _REECB1_FIELDS)),
+    "REECCU1": dict(zip((*_REECB1_PARAMS, "t_soc_s", "soc_ini_pu", "soc_max_pu", "soc_min_pu"),
+                        (*_REECB1_FIELDS, "T", "SOCini", "SOCmax", "SOCmin"))),
 }
 """Field -> PSS/E name of each model (for the record messages and a written-back record)."""
 
@@ -669,10 +1017,10 @@ def vdl_points(v, i) -> tuple[list[float], list[float]]:
     return (v[:n] + [v[n - 1] + k for k in range(1, 5 - n)], i[:n] + [i[n - 1]] * (4 - n))
 
 
-def vdl_trailing_zeros(constants: Sequence) -> list[str]:
-    """Which of a REECA1 record's VDL tables (its values after ``bus 'REECA1' id``) end in
+def vdl_trailing_zeros(constants: Sequence, model: str = "REECA1") -> list[str]:
+    """Which of a REECA1 (or REECCU1) record's VDL tables (its values after ``bus 'REECA1' id``) end in
     (0, 0) pairs that :func:`vdl_points` reads as unused: "VDL1 (2 points used)", ..."""
-    names = IBR_FIELDS["REECA1"]
+    names = IBR_FIELDS[model]
     out = []
     try:
         vals = {c: float(x) for c, x in zip(names, constants) if c in _VDL}
@@ -718,7 +1066,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         values[con] = x
     fields = IBR_PARAMETERS[name]
     kwargs = {f: values[con] for f, con in fields.items()}
-    if name == "REECA1":
+    if name in ("REECA1", "REECCU1"):
         tail = [values[c] for c in _VDL]
         v1, i1 = vdl_points(tail[0:8:2], tail[1:8:2])
         v2, i2 = vdl_points(tail[8:16:2], tail[9:16:2])
@@ -730,13 +1078,14 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
     except ValueError as err:  # name the CONs as the record does
         msg = str(err)
         for f, con in (("vflag", "VFLAG"), ("qflag", "QFLAG"), ("pfflag", "PFFLAG"),
-                       ("pflag", "PFLAG"), ("pqflag", "PQFLAG"), ("vcflag", "VCFlag"),
+                       ("pflag", "PFLAG"), ("pqflag", "PQFLAG" if name != "REGCB1" else "PQFlag"),
+                       ("rateflag", "RateFlag"), ("vcflag", "VCFlag"),
                        ("refflag", "RefFlag"), ("fflag", "Fflag")):
             msg = msg.replace(f"{name}.{f} ", f"{con} ")
         raise ValueError(record_message(msg, name, fields)) from None
 
 
-__all__ = ["VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+__all__ = ["REECB1", "REECCU1", "REGCB1", "VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
            "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
