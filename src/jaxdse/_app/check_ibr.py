@@ -1,4 +1,5 @@
-"""``jaxdse check`` of an inverter-based plant (REGCA1 + REECA1, optional REPCA1): its records,
+"""``jaxdse check`` of an inverter-based plant (REGCA1 or REGCB1 + REECA1, REECB1 or REECCU1, optional
+REPCA1): its records,
 its runs and its judgement, beside the synchronous units of :mod:`jaxdse._app.check`.
 
 Three runs with the terminal voltage imposed (as the playback drives a plant: the measured
@@ -18,8 +19,10 @@ constant); the voltage step is not judged where REECA1's inner voltage loop clos
 the network (QFLAG = 1 with VFLAG = 1, noted): over the last 5 s P and Q within 10 % of the
 range they span after the step (at least 0.001 pu) of their final value, every state derivative
 below 1e-2. A data problem is a record whose values cannot be simulated, or whose limits the
-power flow crosses (P0 outside PMIN..PMAX, Q0 outside QMIN..QMAX, |I0| above IMAX: the CON and
-both values named).
+power flow crosses (P0 outside PMIN..PMAX, Q0 outside QMIN..QMAX, |I0| above IMAX or REGCB1's Imax,
+VT outside VMIN..VMAX where REECB1/REECCU1 regulate it with VFLAG = 0, REECCU1's SOCini at SOCmin
+while discharging or at SOCmax while charging: the CON and both values named). REECCU1's state of
+charge integrates the output power: it is left out of the at-rest derivative and of the modes.
 """
 
 from __future__ import annotations
@@ -108,6 +111,20 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float) -> list
                         f"({where}): the record's own limit does not let the plant hold its power flow"))
 
     e = unit.electrical
+    if records["converter"].model == "REGCB1":
+        cross("converter", "Imax", i0, float(unit.converter.i_max_pu), "above", "|I0|")
+    if records["electrical"].model != "REECA1" and e.qflag and not e.vflag:
+        cross("electrical", "VMAX", vt, float(e.v_max_pu), "above", "VT")
+        cross("electrical", "VMIN", vt, float(e.v_min_pu), "below", "VT")
+    if records["electrical"].model == "REECCU1":   # the power order limit the SOC sets at the start
+        soc, lo, hi = float(e.soc_ini_pu), float(e.soc_min_pu), float(e.soc_max_pu)
+        for bad, con, bound, what in ((p0 > 1e-9 and soc <= lo, "SOCmin", lo, "discharging, PMAX taken to 0"),
+                                      (p0 < -1e-9 and soc >= hi, "SOCmax", hi, "charging, PMIN taken to 0")):
+            if bad:
+                out.append((records["electrical"].model,
+                            f"{record_label(records['electrical'])}: SOCini = {soc:.4g} at or beyond {con} = "
+                            f"{bound:.4g} with P0 = {p0:.4g} pu ({what}; {where}): the record's own limit "
+                            "does not let the plant hold its power flow"))
     cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
     cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
     cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
@@ -164,7 +181,8 @@ def _one(unit: IbrUnit, lane: IbrLane, run) -> IbrResult:
     u0 = UnitInputs(lane.v_re, lane.v_im, zero, zero)
     y0, refs = unit.initial_state(u0, lane.i_re, lane.i_im)
     dy0 = unit.vector_field(y0, u0, refs)
-    jac0 = jax.jacfwd(lambda y: unit.vector_field(y, u0, refs))(y0)
+    rest = np.flatnonzero(unit.at_rest)   # the modes of the states a steady state holds (not REECCU1's SOC)
+    jac0 = jax.jacfwd(lambda y: unit.vector_field(y, u0, refs))(y0)[rest][:, rest]
     s0 = unit.signals(y0, u0, refs)
     v0 = jnp.hypot(lane.v_re, lane.v_im)
 
@@ -193,7 +211,7 @@ def _one(unit: IbrUnit, lane: IbrLane, run) -> IbrResult:
     ok = solved & jnp.all(jnp.isfinite(ys))
     y_end = jnp.where(ok, ys[-1], y0)
     dy_end = rhs(run.end_s, y_end, None)
-    jac_end = jax.jacfwd(lambda y: rhs(run.end_s, y, None))(y_end)
+    jac_end = jax.jacfwd(lambda y: rhs(run.end_s, y, None))(y_end)[rest][:, rest]
     return IbrResult(dy0, y0, s0.p_pu, s0.q_pu, p, q, dy_end, jac0, jac_end, ok)
 
 
@@ -224,7 +242,7 @@ def _state_name(unit: IbrUnit, models: dict, k: int) -> str:
     return f"state {k}"
 
 
-OPEN_LOOP_NOTE = ("REECA1 QFLAG = 1 with VFLAG = 1: its Q loop sets a voltage command that its inner "
+OPEN_LOOP_NOTE = ("REECA1/REECB1/REECCU1 QFLAG = 1 with VFLAG = 1: its Q loop sets a voltage command that its inner "
                   "voltage loop reaches through the network; with the terminal voltage imposed that loop is "
                   "open (two integrators in series, undamped), so the voltage step is run but not judged")
 
@@ -235,7 +253,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
     unit, models = st.model.unit, st.models
     p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
     kh = int(round(spec.held_s * spec.frame_hz))
-    dy0 = np.abs(held["dy0"])
+    dy0 = np.where(unit.at_rest, np.abs(held["dy0"]), 0.0)   # REECCU1's SOC integrates P: not at rest
     k0 = int(np.argmax(dy0)) if dy0.size else 0
     numbers = {"max_dxdt_t0": float(np.max(dy0)) if dy0.size else 0.0,
                "max_dxdt_t0_state": _state_name(unit, models, k0),
@@ -283,7 +301,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
             if spread > band:
                 moves.append(f"{name} moves by {spread:.3g} pu over the last {spec.settle_window_s:g} s "
                              f"(band {band:.3g} pu)")
-        dy_end = np.abs(r["dy_end"])
+        dy_end = np.where(unit.at_rest, np.abs(r["dy_end"]), 0.0)
         numbers[f"{key}_max_dxdt_end"] = float(np.max(dy_end)) if dy_end.size else 0.0
         if numbers[f"{key}_max_dxdt_end"] > spec.settle_derivative:
             k = int(np.argmax(dy_end))
