@@ -236,7 +236,7 @@ def _reference(kind, steps, ramps):
     for a, b in zip(cuts[:-1], cuts[1:]):      # the voltage steps cut the integration
         ts = TS[(TS >= a) & (TS < b)] if b < T_END else TS[TS >= a]
         sol = solve_ivp(rhs, (a, b), x, t_eval=np.r_[ts, b] if b < T_END else ts, method="DOP853",
-                        rtol=1e-11, atol=1e-12, max_step=2e-3)
+                        rtol=1e-10, atol=1e-12, max_step=5e-3)
         out.append(sol.y[:, :len(ts)])
         x = sol.y[:, -1]
     ys = np.concatenate(out, axis=1).T
