@@ -142,7 +142,10 @@ from ._models.governors import WeightedGovernor as WeightedGovernor
 from ._models.ibr import IBR_FIELDS as IBR_FIELDS
 from ._models.ibr import IBR_MODELS as IBR_MODELS
 from ._models.ibr import REECA1 as REECA1
+from ._models.ibr import REECB1 as REECB1
+from ._models.ibr import REECCU1 as REECCU1
 from ._models.ibr import REGCA1 as REGCA1
+from ._models.ibr import REGCB1 as REGCB1
 from ._models.ibr import REPCA1 as REPCA1
 from ._models.ibr import ibr_from_dyr as ibr_from_dyr
 from ._models.machines import GENCLS as GENCLS

@@ -22,7 +22,8 @@ PLANT = ("'REPCA1' '1' 0 {bus} 7 '1' 0 1 1 0.02 18 5 0 0.075 0 0 0 0 0.1 -0.1 0 
          "   0.25 0 0 999 -999 999 -999 0.1 20 0 /\n")
 STORAGE = ("{bus} 'REGCB1' '1' 0 0 0.02 0.02 999 -999 10 0.01 1.3 /\n"
            "{bus} 'REECCU1' '1' 0 0 1 0 1 0.9 1.1 0.02 -0.05 0.05 2 1.05 -1.05 0 0.05 0.436 -0.436 1.1 0.9\n"
-           "   0 0.1 0 40 0.02 99 -99 1 -1 1.7 0.02  0.2 1.5 0.5 1.5 1 1.5 1.5 1.5  0.2 1.5 0.5 1.5 1 1.5 1.5 1.5\n"
+           "   0 0.1 0 40 0.02 99 -99 1 -1 1.7 0.02\n"
+           "   0.2 1.5 0.5 1.5 1 1.5 1.5 1.5  0.2 1.5 0.5 1.5 1 1.5 1.5 1.5\n"
            "   999 {soc} 0.9 0.2 /\n")
 RECORDS = ("9 'REGCA1' '1' 1 0.02 10 0.9 0.4 1.22 1.2 0.8 0.4 -1.3 0.02 0.7 999 -999 0.7 /\n"
            "9 'REECB1' '1' 0 0 0 1 0 0.9 1.1 0.02 -0.05 0.05 2 1.05 -1.05 0 0.05 0.436 -0.436 1.1 0.9\n"
@@ -36,7 +37,8 @@ def doc(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("check_pv")
     raw = (BENCH / "ieee14.raw").read_text()
     rows = "".join(GEN.format(bus=b) for b in (9, 10, 11))
-    (tmp / "case.raw").write_text(raw.replace("0 / End of Generator data", rows + "0 / End of Generator data"))
+    end = "0 / End of Generator data"
+    (tmp / "case.raw").write_text(raw.replace(end, rows + end))
     (tmp / "case.dyr").write_text((BENCH / "ieee14.dyr").read_text() + RECORDS)
     (tmp / "case.toml").write_text('[case]\nraw = "case.raw"\ndyr = "case.dyr"\n')
     out = check_case(load_case(tmp / "case.toml"), progress=False, only=["9_1", "10_1", "11_1"])

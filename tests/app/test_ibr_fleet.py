@@ -127,7 +127,7 @@ def test_validate_says_ibr_calibration_is_not_supported(tmp_path):
 
 @pytest.mark.parametrize("playback, electrical, why", [
     ("surrogate", "REECA1", "validated with its own records only"),
-    ("dyr", "REECB1", "not played back: REECB1 on bus 8 id '1'"),
+    ("dyr", "REECDU1", "not played back: REECDU1 on bus 8 id '1'"),
 ])
 def test_ibr_plant_not_played_back_is_not_judged(tmp_path, playback, electrical, why):
     """The surrogate asked for (a machine's: it does not apply), or a record jaxdse does not

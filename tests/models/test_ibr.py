@@ -281,10 +281,11 @@ def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
     assert full.structure == ("REGCA1", "REECA1", "REPCA1")
     assert any("taken at the terminal" in n for n in full.notes)
     assert not any("Thld" in n for n in full.notes)
-    b = ibr_model(dyr, 9, "1")
-    assert b.unit is None and any("REECB1 is not simulated" in m for m in b.missing)
+    b = ibr_model(dyr, 9, "1")   # REECB1 (PV) is simulated: the plant builds, without a plant controller
+    assert b.missing == [] and b.structure == ("REGCA1", "REECB1", "-")
     alone = ibr_model(dyr, 10, "1")
-    assert alone.unit is None and any("no electrical record (REECA1)" in m for m in alone.missing)
+    assert alone.unit is None
+    assert any("no electrical record (REECA1, REECB1, REECCU1)" in m for m in alone.missing)
     assert is_ibr(dyr, 8, "1") and not is_ibr(dyr, 11, "1")
 
 

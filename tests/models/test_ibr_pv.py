@@ -356,8 +356,9 @@ def test_records_read_in_psse_order(tmp_path):
     recs = {r.model: r for r in read_dyr(path).records}
     conv = ibr_from_dyr("REGCB1", recs["REGCB1"].constants)
     assert (conv.rateflag, conv.pqflag) == (1, 0)
-    assert [float(x) for x in (conv.t_g_s, conv.t_fltr_s, conv.iqrmax_pu_s, conv.iqrmin_pu_s,
-                               conv.rrpwr_pu_s, conv.t_e_s, conv.i_max_pu)] == [0.02, 0.02, 20, -20, 10, 0.01, 1.2]
+    cons = (conv.t_g_s, conv.t_fltr_s, conv.iqrmax_pu_s, conv.iqrmin_pu_s, conv.rrpwr_pu_s, conv.t_e_s,
+            conv.i_max_pu)
+    assert [float(x) for x in cons] == [0.02, 0.02, 20, -20, 10, 0.01, 1.2]
     pv = ibr_from_dyr("REECB1", recs["REECB1"].constants)
     assert (pv.pfflag, pv.vflag, pv.qflag, pv.pqflag) == (0, 1, 1, 0)
     assert float(pv.kqv) == 4 and float(pv.kvi) == 20 and float(pv.i_max_pu) == 1.1
@@ -365,7 +366,8 @@ def test_records_read_in_psse_order(tmp_path):
     bess = ibr_from_dyr("REECCU1", recs["REECCU1"].constants)
     assert bess.pqflag == 1 and float(bess.p_min_pu) == -0.8 and float(bess.i_max_pu) == 1.25
     np.testing.assert_allclose(bess.vdl2_i_pu, BESS["ip"])
-    assert [float(x) for x in (bess.t_soc_s, bess.soc_ini_pu, bess.soc_max_pu, bess.soc_min_pu)] == [60, 0.5, 0.9, 0.47]
+    soc = (bess.t_soc_s, bess.soc_ini_pu, bess.soc_max_pu, bess.soc_min_pu)
+    assert [float(x) for x in soc] == [60, 0.5, 0.9, 0.47]
     bad = list(recs["REECCU1"].constants)
     bad[-1] = 0.95
     with pytest.raises(ValueError, match=r"^REECCU1: SOCmax \(0.9\) must be >= SOCmin \(0.95\)$"):

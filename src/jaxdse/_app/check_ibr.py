@@ -242,7 +242,8 @@ def _state_name(unit: IbrUnit, models: dict, k: int) -> str:
     return f"state {k}"
 
 
-OPEN_LOOP_NOTE = ("REECA1/REECB1/REECCU1 QFLAG = 1 with VFLAG = 1: its Q loop sets a voltage command that its inner "
+OPEN_LOOP_NOTE = ("REECA1/REECB1/REECCU1 QFLAG = 1 with VFLAG = 1: its Q loop sets a voltage command "
+                  "that its inner "
                   "voltage loop reaches through the network; with the terminal voltage imposed that loop is "
                   "open (two integrators in series, undamped), so the voltage step is run but not judged")
 

@@ -171,8 +171,9 @@ write a model-validation report a planner can file. Plant data come from the cas
 in-service units with a machine record on a bus form one plant on their summed MBASE; its
 reference H is the MBASE-weighted H of those records; its governor is the MBASE-weighted sum
 of the units' own governor records (units without one hold their torque). Models the .dyr has
-beyond these are listed, not fatal. A bus whose units have inverter-based records (REGCA1 +
-REECA1, optionally REPCA1) and no machine record is an inverter-based plant: no rotor, so no H
+beyond these are listed, not fatal. A bus whose units have inverter-based records (REGCA1 or
+REGCB1 + REECA1, REECB1 or REECCU1, optionally REPCA1) and no machine
+record is an inverter-based plant: no rotor, so no H
 or D ("not applicable"); with model = "dyr" its records are played back and P against
 frequency, Q against voltage judged by the same windows (MOD-026-2).
 
@@ -454,12 +455,14 @@ Outcome per unit:
                   (the reasons give the numbers)
 Units of one model structure run in one compiled, vmapped call.
 
-Inverter-based plants (REGCA1 + REECA1, optional REPCA1) get the held run, the 2 % voltage step
-(REECA1 Vref0/Vref1 and REPCA1 Vref moved with it) and a 0.1 Hz frequency step (the plant
-controller's droop); data problem where the power flow crosses PMAX/PMIN, QMAX/QMIN or IMAX.
+Inverter-based plants (REGCA1 or REGCB1 + REECA1, REECB1 or REECCU1, optional REPCA1) get the
+held run, the 2 % voltage step (REECx Vref0/Vref1 and REPCA1 Vref moved with it) and a 0.1 Hz
+frequency step (the plant controller's droop); data problem where the power flow crosses
+PMAX/PMIN, QMAX/QMIN, IMAX/Imax, VMAX/VMIN (VFLAG = 0) or REECCU1's SOC limits (REECCU1's state
+of charge integrates P and is left out of the at-rest test).
 A step still settling at 21 s with every mode decaying is a note (its time constant), and so is
-the voltage step of REECA1 QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
-network: open with the voltage imposed). Other converter models (WT4G1, type-3 wind, REECB1,
+the voltage step of QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
+network: open with the voltage imposed). Other converter models (WT4G1, type-3 wind, REECDU1,
 ...) are units, not supported, named.
 
 Every generator record of the .raw is accounted for (the counts add up to the .raw's): the

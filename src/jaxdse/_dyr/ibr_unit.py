@@ -1,5 +1,5 @@
-"""An inverter-based plant's .dyr model: converter (REGCA1 or REGCB1), electrical controls (REECA1,
-REECB1 or REECCU1) and an optional plant controller (REPCA1), driven as a machine's :class:`~jaxdse._dyr.unit.DyrUnit` is:
+"""An inverter-based plant's .dyr model: converter (REGCA1 or REGCB1), electrical controls
+(REECA1, REECB1 or REECCU1) and an optional plant controller (REPCA1), driven as a machine's :class:`~jaxdse._dyr.unit.DyrUnit` is:
 the terminal voltage phasor and the frequency deviation imposed (:class:`UnitInputs`).
 
 The state is one flat vector ``[converter | electrical | plant]``. Signal flow at one instant:

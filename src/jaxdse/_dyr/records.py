@@ -132,8 +132,9 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
             out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
     if not out.missing and out.models["converter"] == "REGCB1":
-        g = next((x for x in raw.generators if x.bus == int(bus)
-                  and x.id.strip().upper() == str(machine_id).strip().upper()), None) if raw is not None else None
+        mid = str(machine_id).strip().upper()
+        g = None if raw is None else next(
+            (x for x in raw.generators if x.bus == int(bus) and x.id.strip().upper() == mid), None)
         conv = parts["converter"]
         if g is None:
             out.notes.append("REGCB1: no generator record for its source impedance ZSORCE: a current "
@@ -168,7 +169,8 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
         if "plant" not in out.models:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
         rec = next(r for r in dyr.unit_records(bus, machine_id) if r.model == out.models["electrical"])
-        for table in vdl_trailing_zeros(rec.constants, rec.model) if rec.model in ("REECA1", "REECCU1") else []:
+        tables = vdl_trailing_zeros(rec.constants, rec.model) if rec.model in ("REECA1", "REECCU1") else []
+        for table in tables:
             out.notes.append(f"{rec.model}: {table}: its trailing (0, 0) points read as unused, the last "
                              "used point held beyond them")
     return out

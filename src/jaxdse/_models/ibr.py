@@ -1,5 +1,6 @@
-"""Inverter-based resources: the WECC second-generation renewable models REGCA1 (generator/
-converter), REECA1 (electrical controls) and REPCA1 (plant controller), as PSS/E names them.
+"""Inverter-based resources: the WECC second-generation renewable models REGCA1 and REGCB1
+(generator/converter), REECA1, REECB1 (photovoltaic) and REECCU1 (storage) (electrical
+controls) and REPCA1 (plant controller), as PSS/E names them.
 
 Conventions (every model):
 
@@ -18,8 +19,11 @@ Conventions (every model):
   limit active and outside the dip band, and the references that hold it.
 
 Sources: WECC REMTF, *WECC Second Generation Wind Turbine Models* (2014) and *Solar Photovoltaic
-Power Plant Modeling and Validation Guideline* (REGC_A, REEC_A, REPC_A block diagrams);
-Siemens PTI, *PSS(R)E Model Library* (REGCA1, REECA1, REPCA1 CON/ICON tables); the model
+Power Plant Modeling and Validation Guideline* (REGC_A, REEC_A, REEC_B, REPC_A block diagrams),
+the REGC_B specification and the *Battery Storage Dynamic Modeling Guideline* (REEC_C);
+Siemens PTI, *PSS(R)E Model Library* (CON/ICON tables; the REGCB1 order as GridPACK's BSD-licensed
+reader and InterPSS read it, the REECCU1 order as a psspy ``add_wind_model`` call writes it; the
+OpenIPSL REECB1 model read for its VFLAG = 0 reference; no code taken); the model
 equations as written out in the GridKit REECA notes (ORNL, BSD-3) and the Dynawo WECC parameter
 records (MPL-2.0), read for the block order only (no code taken). ANDES (GPL) is used only as
 an external reference simulator by ``experiments/andes_ibr``.
