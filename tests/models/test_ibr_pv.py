@@ -378,3 +378,25 @@ def test_records_read_in_psse_order(tmp_path):
         ibr_from_dyr("REGCB1", bad)
     with pytest.raises(ValueError, match="REECB1: expected 30 values"):
         ibr_from_dyr("REECB1", [1.0] * 29)
+
+
+def test_other_combinations_start_at_rest():
+    """The combinations the runs above do not use (REGCB1 with REECA1, REGCA1 with REECCU1, REECB1
+    with VFLAG = 0 or PFFLAG = 1, with and without REPCA1): each builds and its initial state
+    holds the power flow with every derivative zero (REECCU1's SOC: -P0/T). Eager, nothing compiled."""
+    from jaxdse._models.ibr import REECA1
+
+    v, ang, p, q = 1.03, -0.4, 0.6, 0.2
+    u = UnitInputs(jnp.asarray(v * np.cos(ang)), jnp.asarray(v * np.sin(ang)), jnp.asarray(0.0),
+                   jnp.asarray(0.0))
+    i = np.conj((p + 1j * q) / (v * np.exp(1j * ang)))
+    gcb = REGCB1(rateflag=1, pqflag=1, t_e_s=0.01, re_pu=0.01, xe_pu=0.2)
+    for conv, elec, plant in ((gcb, REECA1(qflag=1), REPCA1()), (REGCA1(), REECCU1(qflag=1, pqflag=1), None),
+                              (gcb, REECB1(qflag=1, vflag=0), None), (REGCA1(), REECB1(pfflag=1), REPCA1())):
+        unit = IbrUnit(conv, elec, plant)
+        y0, refs = unit.initial_state(u, i.real, i.imag)
+        d = np.asarray(unit.vector_field(y0, u, refs))
+        s = unit.signals(y0, u, refs)
+        assert np.max(np.abs(d[unit.at_rest])) < 1e-12
+        assert np.allclose(d[~unit.at_rest], -p / float(getattr(elec, "t_soc_s", np.nan)), atol=1e-15)
+        assert abs(float(s.p_pu) - p) < 1e-12 and abs(float(s.q_pu) - q) < 1e-12
