@@ -371,8 +371,9 @@ def test_an_open_or_slow_loop_of_a_plant_is_said_not_failed(tmp_path):
     assert st.model.unit is not None and st.model.unit.electrical.qflag == 1 and st.model.unit.electrical.vflag == 1
     n = int(round(SPEC.end_s * SPEC.frame_hz)) + 1
     p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
-    flat = {"dy0": np.zeros(3), "p_t0": p0, "q_t0": q0, "p": np.full(n, p0), "q": np.full(n, q0), "ok": True,
-            "dy_end": np.zeros(3), "growth_end": -1.0}
+    m = st.model.unit.n_states    # one derivative per state, as a run gives them
+    flat = {"dy0": np.zeros(m), "p_t0": p0, "q_t0": q0, "p": np.full(n, p0), "q": np.full(n, q0), "ok": True,
+            "dy_end": np.zeros(m), "growth_end": -1.0}
     swinging = {**flat, "q": q0 + 0.5 * np.sin(2.0 * np.arange(n) / SPEC.frame_hz), "growth_end": 0.0}
     slow = {**flat, "p": p0 - 0.03 * (1 - np.exp(-np.arange(n) / SPEC.frame_hz / 20.0)), "growth_end": -0.05}
     outcome, reasons, _, notes = check_ibr.judge(st, g, flat, (swinging, slow), SPEC)
