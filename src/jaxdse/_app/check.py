@@ -630,7 +630,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         raise InputError(case.path, "no unit to check: no in-service generator of "
                          f"{Path(raw.source).name} has a machine or inverter-based plant record in the "
                          f".dyr (its {len(raw.generators)} generator record(s): {counts})")
-    statics = [check_ibr.ibr_static(raw, dyr, g) if a.category == "inverter-based"
+    statics = [check_ibr.ibr_static(raw, dyr, g, spec.end_s) if a.category == "inverter-based"
                else _static(raw, dyr, g, case.playback.ke_zero) for g, a in zip(gens, accounts)]
     entries = []
     groups: dict = {}

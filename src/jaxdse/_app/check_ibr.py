@@ -21,7 +21,8 @@ range they span after the step (at least 0.001 pu) of their final value, every s
 below 1e-2. A data problem is a record whose values cannot be simulated, or whose limits the
 power flow crosses (P0 outside PMIN..PMAX, Q0 outside QMIN..QMAX, |I0| above IMAX or REGCB1's Imax,
 VT outside VMIN..VMAX where REECB1/REECCU1 regulate it with VFLAG = 0, REECCU1's SOCini at SOCmin
-while discharging or at SOCmax while charging: the CON and both values named). REECCU1's state of
+while discharging or at SOCmax while charging, or reaching it within the runs at P0: the CON and
+both values named). REECCU1's state of
 charge integrates the output power: it is left out of the at-rest derivative and of the modes.
 """
 
@@ -58,10 +59,11 @@ class IbrStatic(NamedTuple):
     warnings: list
 
 
-def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator) -> IbrStatic:
+def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator, horizon_s: float = 21.0) -> IbrStatic:
     """The plant's records by role, the ones jaxdse does not simulate, the value problems its
     models' checks find, and the limits its power flow crosses (one line each, naming the
-    record and the CON)."""
+    record and the CON); REECCU1's state of charge reaching its limit within ``horizon_s`` (the
+    runs' length) at the power flow's P counts as crossing it."""
     recs = dyr.unit_records(g.bus, g.id)
     models: dict = dict.fromkeys(IBR_KINDS)
     records: dict = {}
@@ -92,11 +94,11 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator) -> IbrStatic:
     if bus is None or bus.problem or not (math.isfinite(bus.vm_pu) and bus.vm_pu > 0):
         problems.append(("bus", f"bus {g.bus} of the generator: no usable voltage VM"))
     elif um.unit is not None and not problems:
-        problems += _crossings(um.unit, records, g, bus.vm_pu)
+        problems += _crossings(um.unit, records, g, bus.vm_pu, horizon_s)
     return IbrStatic(models, records, unsupported, problems, um, [])
 
 
-def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float) -> list:
+def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float, horizon_s: float = 21.0) -> list:
     """The limits of the records that the power flow crosses at the start."""
     p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
     i0 = math.hypot(p0, q0) / vt
@@ -118,13 +120,22 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float) -> list
         cross("electrical", "VMIN", vt, float(e.v_min_pu), "below", "VT")
     if records["electrical"].model == "REECCU1":   # the power order limit the SOC sets at the start
         soc, lo, hi = float(e.soc_ini_pu), float(e.soc_min_pu), float(e.soc_max_pu)
-        for bad, con, bound, what in ((p0 > 1e-9 and soc <= lo, "SOCmin", lo, "discharging, PMAX taken to 0"),
-                                      (p0 < -1e-9 and soc >= hi, "SOCmax", hi, "charging, PMIN taken to 0")):
-            if bad:
+        t_soc = float(e.t_soc_s)
+        for bad, con, bound, what in ((p0 > 1e-9, "SOCmin", lo, "discharging, PMAX taken to 0"),
+                                      (p0 < -1e-9, "SOCmax", hi, "charging, PMIN taken to 0")):
+            if not bad:
+                continue
+            reach = (soc - bound) * t_soc / p0        # d SOC/dt = -P0/T
+            head = f"{record_label(records['electrical'])}: SOCini = {soc:.4g}"
+            if reach <= 0:
                 out.append((records["electrical"].model,
-                            f"{record_label(records['electrical'])}: SOCini = {soc:.4g} at or beyond {con} = "
-                            f"{bound:.4g} with P0 = {p0:.4g} pu ({what}; {where}): the record's own limit "
-                            "does not let the plant hold its power flow"))
+                            f"{head} at or beyond {con} = {bound:.4g} with P0 = {p0:.4g} pu ({what}; {where}): "
+                            "the record's own limit does not let the plant hold its power flow"))
+            elif reach < horizon_s:
+                out.append((records["electrical"].model,
+                            f"{head} reaches {con} = {bound:.4g} after {reach:.3g} s at P0 = {p0:.4g} pu "
+                            f"(T = {t_soc:g} s; {what}; {where}): the plant cannot hold its power flow "
+                            f"for the {horizon_s:g} s of the check"))
     cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
     cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
     cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
