@@ -363,6 +363,11 @@ def test_records_read_in_psse_order(tmp_path):
     assert (pv.pfflag, pv.vflag, pv.qflag, pv.pqflag) == (0, 1, 1, 0)
     assert float(pv.kqv) == 4 and float(pv.kvi) == 20 and float(pv.i_max_pu) == 1.1
     assert float(pv.t_pord_s) == 0.05 and float(pv.p_min_pu) == 0.0
+    other = list(recs["REECB1"].constants)
+    other[0] = "1234"                    # IREG: an array leaf, one structure whatever the bus
+    remote = ibr_from_dyr("REECB1", other)
+    assert int(remote.remote_bus) == 1234
+    assert jax.tree_util.tree_structure(remote) == jax.tree_util.tree_structure(pv)
     bess = ibr_from_dyr("REECCU1", recs["REECCU1"].constants)
     assert bess.pqflag == 1 and float(bess.p_min_pu) == -0.8 and float(bess.i_max_pu) == 1.25
     np.testing.assert_allclose(bess.vdl2_i_pu, BESS["ip"])
