@@ -148,8 +148,8 @@ def _pad(series_list):
 
 # --- running ----------------------------------------------------------------------------------
 
-IBR_NOT_CALIBRATED = ("an inverter-based plant: ranking and calibration of IBR records (REGCA1, REECA1, "
-                      "REPCA1) are not yet supported; `jaxdse fleet` plays its records back and "
+IBR_NOT_CALIBRATED = ("an inverter-based plant: ranking and calibration of IBR records (REGCA1, REGCB1, "
+                      "REECA1, REECB1, REECCU1, REPCA1) are not yet supported; `jaxdse fleet` plays its records back and "
                       "validates them (P against frequency, Q against voltage)")
 """Why ``jaxdse validate`` skips an inverter-based plant (one line)."""
 

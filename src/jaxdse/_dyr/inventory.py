@@ -11,8 +11,8 @@ one-line reason, so that a check or a fleet can say what became of each:
   machine record: a unit whose records are incomplete (a data problem);
 * ``out of service`` -- status 0 (with or without dynamic records);
 * ``no dynamic records`` -- in service, no .dyr record on its bus and ID;
-* ``inverter-based`` -- in service, a converter-interfaced plant (REGCA1, REECA1, REPCA1,
-  WT4G1, PVGU1, ...): a unit of the check, ``not supported`` where a record's model is not
+* ``inverter-based`` -- in service, a converter-interfaced plant (REGCA1, REGCB1, REECA1,
+  REECB1, REECCU1, REPCA1, WT4G1, PVGU1, ...): a unit of the check, ``not supported`` where a record's model is not
   simulated (named);
 * ``not a generator`` -- in service, a generator-data record whose dynamic record is a static
   var compensator or STATCOM (CSVGN1, CSTATT, SVSMO1, ...): not a generator;
