@@ -190,7 +190,13 @@ def block() -> str:
             f"{o['delay_s']['p99']:.2f} s. Capacity: {big['units']} units at {big['frames_per_s']} frames/s "
             f"{'keep' if big['keeps_up'] else 'do not keep'} up (processing {big['processing_ms_per_frame']['median']:.1f}"
             f" ms per frame, median, against a {big['frame_period_ms']:.1f} ms period; delay 99 % "
-            f"{big['delay_s']['p99']:.2f} s); {len(keep)} of {len(c)} configurations keep up.")
+            f"{big['delay_s']['p99']:.2f} s); {len(keep)} of {len(c)} configurations keep up."
+            + ("" if "speed" not in mon else
+               " README's example at `--speed` 1 and 5: delay median "
+               + " and ".join(f"{r['delay_s']['median']:.3f} s" for r in mon["speed"]["rows"])
+               + ", 99 % " + " and ".join(f"{r['delay_s']['p99']:.3f} s" for r in mon["speed"]["rows"])
+               + f" of stream time (differences {mon['speed']['difference_s']['median']:.3f} s and "
+               f"{mon['speed']['difference_s']['p99']:.3f} s)."))
 
     tb = load("benchmarks/results.json")
     if tb:
@@ -339,6 +345,16 @@ def block() -> str:
                          f"[{sys_row['E_ci95'][0] / 1e3:.1f}, {sys_row['E_ci95'][1] / 1e3:.1f}], "
                          f"{100 * sys_row['measured_share']:.0f} % measured, commitment figure "
                          f"{sys_row['E_commitment_MWs'] / 1e3:.1f} GW s")
+        live = si.get("osl_live")
+        if live:
+            sy = live["per_area"]["system"]
+            text += (f"; OSL case 1 from its stream (`{live['command']}`, `osl_live.png`): {len(live['areas'])} "
+                     f"lines every {live['spacing_s']:g} s of stream time ({sy['updates']} per area), system E "
+                     f"{sy['E_MWs_min'] / 1e3:.1f}-{sy['E_MWs_max'] / 1e3:.1f} GW s beside the commitment figure "
+                     f"{sy['E_commitment_MWs'] / 1e3:.1f} GW s, interval width {sy['ci95_width_percent_median']:.1f} % "
+                     f"(median), {100 * sy['measured_share_median']:.0f} % measured (median); delay from a line's "
+                     f"time to its emission median {live['inertia_delay_s']['median']:.2f} s, 99 % "
+                     f"{live['inertia_delay_s']['p99']:.2f} s")
         out.append(text + ".")
     return "\n".join(out)
 

@@ -22,6 +22,9 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   time where it restarts the estimators: per fault what the monitor counted and did, the
   median H of the last update before and of the first after it, and any update that names an H
   whose interval misses the batch interval;
+* ``speed``: README's example (``examples/csv_positive_sequence.toml``, ``window_s`` 60) served
+  at ``--speed`` 1 (100 s) and 5 (70 s): the delay of the updates in stream seconds, median and
+  99th percentile, and their difference between the two speeds;
 * ``capacity``: 1, 22 and 506 units at 30 frames/s (OSL, tiled 23x) and 1, 20 and 500 at 60
   frames/s (npcc, tiled 2x and 50x), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
   the main thread's processing time per frame against the frame period, and the delay from a
@@ -362,7 +365,28 @@ def part_capacity(work):
     return {"rows": rows, "seconds": CAPACITY_S, "keep_up_delay_s": KEEP_UP_DELAY_S}
 
 
-PARTS = {"osl": part_osl, "npcc": part_npcc, "ambient": part_ambient, "faults": part_faults,
+EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
+SPEEDS = ((1, 100.0), (5, 70.0))
+"""README's example (``examples/monitor.toml``'s fleet, ``window_s`` 60) at ``--speed`` 1 and 5, and
+the monitor's ``--duration`` [wall s] of each."""
+
+
+def part_speed(work):
+    """The delay of the updates, in stream seconds, in real time and five times faster: the
+    same (the estimate's own wait plus the monitor's work times the pace)."""
+    rows = []
+    for speed, seconds in SPEEDS:
+        s = run_part(EXAMPLE, work / f"speed_{speed}", seconds, 60.0, "--speed", str(speed))
+        d, w = s["delay_s"] or {}, s.get("wall_delay_s") or {}
+        rows.append({"speed": speed, "monitor_duration_s": seconds, "updates": s["updates"],
+                     "delay_s": d, "wall_delay_s": w})
+    one, five = rows
+    diff = {k: abs(five["delay_s"][k] - one["delay_s"][k]) for k in ("median", "p99")}
+    return {"rows": rows, "difference_s": diff,
+            "positive": all(r["delay_s"].get("median", -1) > 0 for r in rows)}
+
+
+PARTS = {"osl": part_osl, "speed": part_speed, "npcc": part_npcc, "ambient": part_ambient, "faults": part_faults,
          "capacity": part_capacity}
 
 
@@ -453,6 +477,17 @@ def report(doc) -> str:
                          f"{run.get('stale_samples', 0)} | "
                          f"{run['restarts']} |")
         lines.append("")
+    sp = doc.get("speed")
+    if sp:
+        lines += ["## The delay at `--speed` 1 and 5 (README's example, window 60 s)", "",
+                  "| speed | monitor [s] | updates | delay median / 99 % [s of stream time] | wall delay median [s] |",
+                  "|---|---|---|---|---|"]
+        for r in sp["rows"]:
+            d, w = r["delay_s"] or {}, r["wall_delay_s"] or {}
+            lines.append(f"| {r['speed']} | {r['monitor_duration_s']:g} | {r['updates']} | {_f(d.get('median'), '.3f')} / "
+                         f"{_f(d.get('p99'), '.3f')} | {_f(w.get('median'), '.3f')} |")
+        lines += ["", f"Difference between the speeds: median {sp['difference_s']['median']:.3f} s, 99 % "
+                  f"{sp['difference_s']['p99']:.3f} s; every delay positive: {sp['positive']}.", ""]
     c = doc.get("capacity")
     if c:
         lines += [f"## Latency and capacity ({c['seconds']:g} s each, real time, window 30 s)", "",

@@ -3,6 +3,7 @@
     python experiments/system_inertia/run.py bench [CASE ...]   # ANDES ieee14, npcc: every event recording
     python experiments/system_inertia/run.py bench-ambient [CASE ...]   # their ambient recordings
     python experiments/system_inertia/run.py osl     # NASPI OSL contest case 1 (WECC 240)
+    python experiments/system_inertia/run.py osl-live   # the same, from its stream, every second
 
 bench: each fleet file of experiments/andes_bench (line trip, load step, generator trip) run
 with an `[inertia]` section (a status CSV takes the tripped generator offline at 10 s). The
@@ -15,10 +16,17 @@ the true share. Writes results.json (key "bench") and bench.png here.
 osl: experiments/naspi_osl_case1/fleet.toml with `[inertia]`: per area and system E with its
 interval, measured share and commitment figure, one value per recording (the fleet's
 whole-recording estimates). Writes results.json (key "osl") and osl.png here.
+
+osl-live: the same recording served as a C37.118 stream by `jaxdse pmu-sim` (real time, 90 s)
+and read by `jaxdse monitor` with an empty `[inertia]` section and `window_s` 30: every area's
+and the system's E each second of stream time, beside the commitment figure. Writes
+results.json (key "osl_live") and osl_live.png here.
 """
 
 import json
 import re
+import shutil
+import subprocess
 import sys
 import tempfile
 import time
@@ -255,9 +263,105 @@ def osl_figure(areas: list, path: Path) -> None:
     plt.close(fig)
 
 
+JAXDSE = str(Path(sys.executable).parent / "jaxdse") if (Path(sys.executable).parent / "jaxdse").exists() \
+    else (shutil.which("jaxdse") or "jaxdse")
+"""The console script, beside this Python where it is installed there."""
+LIVE_WINDOW_S = 30.0
+
+
+def osl_live():
+    """OSL case 1 through pmu-sim and the monitor (console scripts), E per second."""
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        fleet = fleet_with_inertia(OSL / "fleet.toml", tmp, "floor_MWs = 700000.0\nlargest_loss_mw = 2000.0\n")
+        sim = subprocess.Popen([JAXDSE, "pmu-sim", str(fleet), "--port", "0"], stdout=subprocess.PIPE,
+                               stderr=subprocess.PIPE, text=True)
+        try:
+            m = re.search(r":(\d+) ", sim.stdout.readline())
+            if not m:
+                raise RuntimeError(f"pmu-sim did not start: {sim.stderr.read()}")
+            cfg = tmp / "monitor.toml"
+            cfg.write_text(f'fleet = "{fleet}"\nupdate_s = 1.0\nwindow_s = {LIVE_WINDOW_S}\n'
+                           f'[stream]\nport = {m.group(1)}\ntimeout_s = 3.0\nfrequency = "angle"\n')
+            out = tmp / "live"
+            subprocess.run([JAXDSE, "monitor", str(cfg), "--out", str(out), "--duration", "100"], check=True,
+                           stdout=subprocess.DEVNULL)
+        finally:
+            sim.terminate()
+            sim.wait(timeout=30)
+        lines = [json.loads(x) for x in (out / "updates.jsonl").read_text().splitlines()]
+        summary = json.loads((out / "monitor.json").read_text())
+        if len(sys.argv) > 2:   # keep the monitor's lines for a closer look
+            shutil.copy(out / "updates.jsonl", sys.argv[2])
+    rows = [x for x in lines if "E_MWs" in x]
+    t_start = min(x["t"] for x in rows)
+    for x in rows:
+        x["t"] = round(x["t"] - t_start, 3)   # stream seconds from the first line
+    areas = sorted({x["area"] for x in rows}, key=lambda a: (a == "system", a))
+    per = {a: [x for x in rows if x["area"] == a] for a in areas}
+    res = {"command": "python experiments/system_inertia/run.py osl-live", "wall_s": time.perf_counter() - t0,
+           "window_s": LIVE_WINDOW_S, "lines": len(rows), "areas": areas,
+           "first_t_s": min(x["t"] for x in rows), "last_t_s": max(x["t"] for x in rows),
+           "series": {a: {"t_s": [x["t"] for x in v], "E_MWs": [round(x["E_MWs"], 1) for x in v],
+                          "E_ci95": [[round(y, 1) for y in x["E_ci95"]] for x in v],
+                          "measured_share": [round(x["measured_share"], 4) for x in v],
+                          "units_measured": [x["units_measured"] for x in v]} for a, v in per.items()},
+           "spacing_s": float(np.median(np.diff(sorted({x["t"] for x in rows})))),
+           "inertia_delay_s": summary.get("inertia_delay_s"),
+           "per_area": {a: {"updates": len(v), "E_MWs_median": float(np.median([x["E_MWs"] for x in v])),
+                            "E_MWs_min": float(min(x["E_MWs"] for x in v)),
+                            "E_MWs_max": float(max(x["E_MWs"] for x in v)),
+                            "E_commitment_MWs": float(np.median([x["E_commitment_MWs"] for x in v])),
+                            "measured_share_median": float(np.median([x["measured_share"] for x in v])),
+                            "ci95_width_percent_median": float(np.median(
+                                [100 * (x["E_ci95"][1] - x["E_ci95"][0]) / x["E_MWs"] for x in v])),
+                            "units_online": int(np.median([x["units_online"] for x in v])),
+                            "units_measured_median": int(np.median([x["units_measured"] for x in v])),
+                            "rocof_hz_per_s_median": (None if v[0].get("rocof_hz_per_s") is None else
+                                                      float(np.median([x["rocof_hz_per_s"] for x in v])))}
+                        for a, v in per.items()}}
+    merge_results("osl_live", lambda old: res)
+    osl_live_figure(per, 700000.0, HERE / "osl_live.png")
+
+
+def osl_live_figure(per: dict, floor: float, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    areas = list(per)
+    fig, axes = plt.subplots(len(areas), 1, figsize=(9, 1.9 * len(areas) + 0.6), sharex=True, squeeze=False)
+    for ax, a in zip(axes[:, 0], areas):
+        v = per[a]
+        t = np.array([x["t"] for x in v])
+        e = np.array([x["E_MWs"] for x in v]) / 1e3
+        lo = np.array([x["E_ci95"][0] for x in v]) / 1e3
+        hi = np.array([x["E_ci95"][1] for x in v]) / 1e3
+        com = np.array([x["E_commitment_MWs"] for x in v]) / 1e3
+        ax.fill_between(t, lo, hi, color="C0", alpha=0.25, step="post", label="95 % interval")
+        ax.step(t, e, where="post", color="C0", label="E (measured units: identified H)")
+        ax.step(t, com, where="post", color="C3", ls="--", label="commitment figure (.dyr H)")
+        if a == "system":
+            ax.axhline(floor / 1e3, color="k", ls=":", label=f"floor {floor / 1e3:.0f} GW s")
+        share = np.median([x["measured_share"] for x in v])
+        ax.set_ylabel(f"{a}\nE [GW s]")
+        ax.set_title(f"{a}: {int(np.median([x['units_online'] for x in v]))} units online, "
+                     f"{100 * share:.0f} % of E measured", fontsize=8, loc="left")
+        ax.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, loc="lower right", ncol=2)
+    axes[-1, 0].set_xlabel("stream time from the first line [s] (measured units count once their 30 s window is full)")
+    fig.suptitle("OSL case 1 (WECC 240) from its stream: stored kinetic energy per area, each second", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 if __name__ == "__main__":
     if len(sys.argv) > 1 and sys.argv[1] == "osl":
         osl()
+    elif len(sys.argv) > 1 and sys.argv[1] == "osl-live":
+        osl_live()
     elif len(sys.argv) > 1 and sys.argv[1] == "bench-ambient":
         bench(tuple(sys.argv[2:]) or CASES, ("ambient",))
     else:

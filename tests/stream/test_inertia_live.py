@@ -16,8 +16,9 @@ KEYS = ["t", "area", "E_MWs", "E_ci95", "measured_share", "E_commitment_MWs", "r
         "units_online", "units_measured"]
 
 
-def _update(unit, t, h, ci):
-    return types.SimpleNamespace(unit=unit, t=t, h_s=h, h_ci95=ci)
+def _update(unit, t, h, ci, verdict=None):
+    verdict = verdict or ("identified" if h is not None else "not excited")
+    return types.SimpleNamespace(unit=unit, t=t, h_s=h, h_ci95=ci, verdict=verdict)
 
 
 def test_tracker_lines_online_by_current_and_stale_fallback():
@@ -34,6 +35,7 @@ def test_tracker_lines_online_by_current_and_stale_fallback():
     tr.update(_update("p1", 99.0, 5.5, (5.0, 6.0)))
     tr.update(_update("p2", 99.0, 4.2, (4.0, 4.4)))
     tr.update(_update("p2", 99.0, None, None))                  # not identified: the last one stays
+    tr.update(_update("p2", 99.0, 9.0, (4.0, 20.0), "weakly identified"))   # a wide interval: nor does it move E
     tr.samples(["p1", "p2"], [0.8, 0.7], [True, True], 99.9)
     lines = tr.tick(100.0)
     assert [x["area"] for x in lines] == ["A", "B", "system"] and all(list(x) == KEYS for x in lines)

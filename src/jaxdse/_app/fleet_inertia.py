@@ -5,8 +5,8 @@ fleet.json's ``inertia`` and the figure ``inertia.png``).
 From files it is one value per recording: each measured plant's whole-recording estimate (its
 identified H and interval), the case's other units at the status the .raw (or the status CSV at
 the recording's last sample) gives. A measured plant is online when its recorded current's mean
-is above ``online_current_pu`` [pu of its rating]; an estimate that is not identified (or
-weakly identified) leaves the plant on its model H (``model (no estimate)``).
+is above ``online_current_pu`` [pu of its rating]; an estimate that is not `identified` (weakly
+identified included) leaves the plant on its model H (``model (no estimate)``).
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ from .._core.inertia import AreaInertia, UnitInertia, area_inertia
 from .._dyr.inertia import area_list, case_units, inertia_units, measured_plant
 from .fleet_file import Fleet, FleetPlant
 
-USED_VERDICTS = ("identified", "weakly identified")
-"""H verdicts whose estimate counts as measured (as the monitor's updates give H)."""
+USED_VERDICTS = ("identified",)
+"""H verdicts whose estimate counts as measured (as in the monitor): a weakly identified H, whose
+interval is wide, leaves the plant on its model H."""
 CSV_FIELDS = ("area", "E_MWs", "E_ci95_low", "E_ci95_high", "E_measured_MWs", "measured_share",
               "E_commitment_MWs", "rocof_hz_per_s", "rocof_ci95_low", "rocof_ci95_high", "rocof_reason",
               "units_online", "units_measured", "units_stale", "units_without_h", "below_floor")

@@ -335,15 +335,6 @@ class Calibration(NamedTuple):
     """The :class:`ParameterSpec` of each fitted parameter (``labels`` order)."""
 
 
-@eqx.filter_jit
-def _rms_pq(unit, events, settings):
-    def one(series, p, q, w):
-        r = play_back(unit, series, settings)
-        return jnp.stack([jnp.sum(w * (r.p_pu - p) ** 2), jnp.sum(w * (r.q_pu - q) ** 2)])
-    s = jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight).sum(0)
-    return jnp.sqrt(s / jnp.maximum(jnp.sum(events.weight), 1.0))
-
-
 def _values(z, specs, x0, free):
     """The parameters at ``z``: the free ones from their coordinates, the others held at ``x0``
     (exactly: the coordinates' round trip is not)."""
@@ -423,21 +414,36 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     u = np.array([_unit_position(float(v), spec) for v, spec in zip(x, specs)])
     ci[u <= AT_BOUND, 0] = lower[u <= AT_BOUND]
     ci[u >= 1.0 - AT_BOUND, 1] = upper[u >= 1.0 - AT_BOUND]
-    return Calibration([s.label for s in specs], x0, x, ci, np.asarray(_rms_pq(unit, events, settings)),
-                       np.asarray(_rms_pq(fitted, events, settings)), rho, bandwidth, v_noise,
+    sd = jnp.asarray(sigma)
+    return Calibration([s.label for s in specs], x0, x, ci, np.asarray(_rms_pq(unit, events, sd, settings)),
+                       np.asarray(_rms_pq(fitted, events, sd, settings)), rho, bandwidth, v_noise,
                        bool(sol.result == optx.RESULTS.successful), fitted, specs)
 
 
 # --- the decision: change only what the events reject ------------------------------------------
 
 @eqx.filter_jit
-def _event_costs(unit, events: Events, sigma, settings):
-    """Per event, the sum of squared noise-normalised residuals of P and Q [-], [E]."""
+def _errors(unit, events: Events, sigma, settings):
+    """One playback of every event: per event, the sum of squared noise-normalised residuals
+    of P and Q [-], [E]; and the RMS error of (P, Q) over all events [pu], [2]."""
     def one(series, p, q, w):
         r = play_back(unit, series, settings)
-        c = w * (((r.p_pu - p) / sigma[0]) ** 2 + ((r.q_pu - q) / sigma[1]) ** 2)
-        return jnp.sum(jnp.where(jnp.isfinite(c), c, 1e6))
-    return jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight)
+        ep, eq = r.p_pu - p, r.q_pu - q
+        c = w * ((ep / sigma[0]) ** 2 + (eq / sigma[1]) ** 2)
+        return jnp.sum(jnp.where(jnp.isfinite(c), c, 1e6)), jnp.stack([jnp.sum(w * ep ** 2),
+                                                                       jnp.sum(w * eq ** 2)])
+    cost, sq = jax.vmap(one)(events.series, events.p_pu, events.q_pu, events.weight)
+    return cost, jnp.sqrt(sq.sum(0) / jnp.maximum(jnp.sum(events.weight), 1.0))
+
+
+def _event_costs(unit, events: Events, sigma, settings):
+    """Per event, the sum of squared noise-normalised residuals of P and Q [-], [E]."""
+    return _errors(unit, events, sigma, settings)[0]
+
+
+def _rms_pq(unit, events: Events, sigma, settings):
+    """The RMS error of (P, Q) over all events [pu], [2]."""
+    return _errors(unit, events, sigma, settings)[1]
 
 
 def noise_threshold(k: int, lag1: float, level: float = 0.95) -> float:
