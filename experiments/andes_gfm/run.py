@@ -17,7 +17,6 @@ The recordings are noise-free; each gets PMU noise as the ANDES bench's (``run.p
 import argparse
 import gzip
 import json
-import re
 import sys
 import time
 import zlib
@@ -134,10 +133,16 @@ def main():
             rows.append(by_playback(event, series, jd.GfmUnit(conv), truth))
     if "estimator" in args.methods:
         rows = by_estimator(units, truth) + rows
+    path = HERE / "results.json"
+    if path.exists():  # keep the rows of the methods and events not rerun
+        done = {(r["method"], r["event"]) for r in rows}
+        rows = [r for r in json.loads(path.read_text())["units"]
+                if (r["method"], r["event"]) not in done] + rows
+        rows.sort(key=lambda r: (r["method"] != "estimator", EVENTS.index(r["event"])))
     out = {"noise": {"tve_percent": TVE_PERCENT, "f_noise_hz": F_NOISE_HZ},
            "x_internal_pu": args.x_internal if args.x_internal is not None else meta["constants"]["xs"],
            "tolerance": TOLERANCE, "units": rows, "wall_s": time.perf_counter() - t0}
-    (HERE / "results.json").write_text(json.dumps(out, indent=2) + "\n")
+    path.write_text(json.dumps(out, indent=2) + "\n")
     print(f"[gfm] wrote results.json in {out['wall_s']:.0f} s", file=sys.stderr)
 
 

@@ -44,9 +44,14 @@ class GfmUnit(eqx.Module):
         return self.converter.initial_state(u, i_re, i_im)
 
 
-NO_DROOP_R_PU = 1e6
+NO_DROOP_R_PU = 1e3
 """The droop [pu speed / pu power] of the estimator's governor for a converter without a
-frequency droop (kw = 0): Tm is then Pref, constant."""
+frequency droop (kw = 0): Tm is then Pref to 1e-3 of dw. With R = 1e6 and T1 = T3 = 1e-3 s
+every fit of experiments/andes_gfm came back NaN (solver failed); with R = 1e3 and 0.05 s
+finite (which of the two mattered was not measured)."""
+GOVERNOR_LAG_S = 0.05
+"""T1 = T3 of that governor [s]: no lag worth speaking of against the swing (see
+:data:`NO_DROOP_R_PU`)."""
 
 
 def classical_plant(converter: REGCV1, s_rated_mva: float, v_rated_kv: float,
@@ -65,9 +70,9 @@ def classical_plant(converter: REGCV1, s_rated_mva: float, v_rated_kv: float,
     kw = float(converter.kw_pu)
     machine = Machine(xd_pu=x, xq_pu=x, xd1_pu=x, rs_pu=float(converter.ra_pu), td01_s=1e4,
                       s_rated_mva=s_rated_mva, v_rated_kv=v_rated_kv, f_nominal_hz=f0)
-    gov = TGOV1(r_pu=1.0 / kw if kw > 0 else NO_DROOP_R_PU, t1_s=1e-3, v_max_pu=1e3, v_min_pu=-1e3,
-                t2_s=0.0, t3_s=1e-3, dt_pu=0.0)
+    gov = TGOV1(r_pu=1.0 / kw if kw > 0 else NO_DROOP_R_PU, t1_s=GOVERNOR_LAG_S, v_max_pu=1e3,
+                v_min_pu=-1e3, t2_s=0.0, t3_s=GOVERNOR_LAG_S, dt_pu=0.0)
     return Plant(machine=machine, governor=gov, s_base_mva=s_base_mva)
 
 
-__all__ = ["GfmUnit", "NO_DROOP_R_PU", "classical_plant"]
+__all__ = ["GOVERNOR_LAG_S", "GfmUnit", "NO_DROOP_R_PU", "classical_plant"]
