@@ -5,6 +5,9 @@ Run with the separate ANDES venv (ANDES is GPL-3: it is used here as an external
 never imported by ``src/`` or ``tests/``)::
 
     /work/andes-venv/bin/python experiments/andes_gfm/generate.py
+    # REGCV2 (a check of jaxdse's REGCV2; the line trip only, 20 s):
+    /work/andes-venv/bin/python experiments/andes_gfm/generate.py --model REGCV2 \
+        --out experiments/andes_gfm/regcv2 --events line_trip --t-end 20
 
 Case: the ANDES bench's ieee14 (``experiments/andes_bench/data/ieee14/ieee14.raw`` and its .dyr,
 which that bench wrote from ANDES's ``ieee14_full.xlsx``) with the synchronous unit at bus 8
@@ -61,6 +64,9 @@ UNITS = dict(Sn="MVA", fn="Hz", Tc="s (lag of the modulated voltage)",
              KpId="pu voltage / pu current", KiId="pu voltage / (pu current s)",
              KpIq="pu voltage / pu current", KiIq="pu voltage / (pu current s)")
 LOAD_STEP_PU = 0.15
+REGCV2_LAGS = dict(Tid=0.01, Tiq=0.01)
+"""REGCV2 (``--model REGCV2``, a check of jaxdse's REGCV2, written to ``--out``): ANDES's
+default current lags [s]; its other constants are REGCV1's without Tc and the inner PI."""
 
 
 def _dyr_without_bus(bus: int) -> Path:
@@ -79,11 +85,16 @@ def _branch(ss, a: int, b: int) -> str:
     raise KeyError((a, b))
 
 
-def simulate(event: str):
+def simulate(event: str, model: str = "REGCV1", t_end: float = T_END):
     ss = andes.load(str(BENCH / "ieee14.raw"), addfile=str(_dyr_without_bus(BUS)), setup=False,
                     no_output=True, default_config=True)
     gen = [g for g, b in zip(ss.PV.idx.v, ss.PV.bus.v) if int(b) == BUS][0]
-    ss.add("REGCV1", dict(idx="VSG_8", bus=BUS, gen=gen, **REGCV1))
+    params = dict(REGCV1)
+    if model == "REGCV2":  # current lags instead of the inner PI and the modulator
+        for k in ("Tc", "KpId", "KiId", "KpIq", "KiIq"):
+            params.pop(k)
+        params.update(REGCV2_LAGS)
+    ss.add(model, dict(idx="VSG_8", bus=BUS, gen=gen, **params))
     detail = {}
     if event == "line_trip":
         line = _branch(ss, 7, 9)
@@ -101,7 +112,7 @@ def simulate(event: str):
     ss.setup()
     if not ss.PFlow.run():
         raise RuntimeError("power flow did not converge")
-    ss.TDS.config.tf = T_END
+    ss.TDS.config.tf = t_end
     ss.TDS.config.tstep = 1.0 / STEP_RATE
     ss.TDS.config.no_tqdm = True
     ss.TDS.config.criteria = 0
@@ -109,11 +120,11 @@ def simulate(event: str):
         raise RuntimeError(f"{event}: ANDES TDS did not finish")
     t = np.asarray(ss.dae.ts.t)
     b = ss.Bus.idx2uid(BUS)
-    r = ss.REGCV1
+    r = getattr(ss, model)
     y, x = ss.dae.ts.y, ss.dae.ts.x
     # the value at each step: the last output at or before it (ANDES writes both sides of an
     # event at the same time; the step after the switching takes the post-switching one)
-    steps = np.round(np.arange(0.0, T_END + 1e-9, 1.0 / STEP_RATE), 9)
+    steps = np.round(np.arange(0.0, t_end + 1e-9, 1.0 / STEP_RATE), 9)
     k = np.searchsorted(t, steps + 1e-9, side="right") - 1
     v, a = y[k, ss.Bus.v.a[b]], y[k, ss.Bus.a.a[b]]
     pe, qe = y[k, r.Pe.a[0]], y[k, r.Qe.a[0]]
@@ -148,10 +159,18 @@ def _write_gz(path: Path, cols: dict):
 
 
 def main():
+    import argparse
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", default="REGCV1", choices=("REGCV1", "REGCV2"))
+    ap.add_argument("--out", type=Path, default=HERE)
+    ap.add_argument("--events", nargs="*", default=["line_trip", "load_step", "gen_trip"])
+    ap.add_argument("--t-end", type=float, default=T_END)
+    args = ap.parse_args()
     andes.config_logger(stream_level=40)
+    args.out.mkdir(parents=True, exist_ok=True)
     truth = {"generator": "experiments/andes_gfm/generate.py", "andes_version": andes.__version__,
-             "case": "ANDES bench ieee14 (.raw/.dyr) without the bus-8 GENROU/TGOV1/ESST3A, REGCV1 "
-                     "at bus 8 on the same static generator",
+             "case": "ANDES bench ieee14 (.raw/.dyr) without the bus-8 GENROU/TGOV1/ESST3A, "
+                     f"{args.model} at bus 8 on the same static generator",
              "system_base_mva": 100.0, "f0_hz": REGCV1["fn"], "tag": TAG, "bus": BUS,
              "model": "REGCV1", "constants": REGCV1, "units": UNITS,
              "H_s": REGCV1["M"] / 2, "D_pu": REGCV1["D"],
@@ -164,16 +183,21 @@ def main():
              "integration": {"step_s": 1.0 / STEP_RATE, "fps": FPS, "t_event_s": T_EVENT,
                              "t_end_s": T_END},
              "events": {}}
-    for event in ("line_trip", "load_step", "gen_trip"):
-        rec, tr, detail, pref0, q0, vref = simulate(event)
-        _write_gz(HERE / f"{event}.csv.gz", rec)
-        _write_gz(HERE / f"{event}_truth.csv.gz", tr)
+    if args.model == "REGCV2":
+        truth["model"] = "REGCV2"
+        truth["constants"] = {**{k: v for k, v in REGCV1.items()
+                                 if k not in ("Tc", "KpId", "KiId", "KpIq", "KiIq")}, **REGCV2_LAGS}
+    truth["integration"]["t_end_s"] = args.t_end
+    for event in args.events:
+        rec, tr, detail, pref0, q0, vref = simulate(event, args.model, args.t_end)
+        _write_gz(args.out / f"{event}.csv.gz", rec)
+        _write_gz(args.out / f"{event}_truth.csv.gz", tr)
         truth["events"][event] = detail
         truth["initial"] = {"pref_pu": pref0, "qref_pu": q0, "vref_pu": vref}
         w = tr["omega_pu"]
         print(event, f"omega {w.min():.5f}..{w.max():.5f}  Pe {tr['pe_pu'].min():.4f}.."
                      f"{tr['pe_pu'].max():.4f}  |V| {rec[TAG + '/VM'].min():.4f}..{rec[TAG + '/VM'].max():.4f}")
-    (HERE / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    (args.out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
 
 
 if __name__ == "__main__":

@@ -6,7 +6,9 @@ terminal recordings (``generate.py``), two ways, with 95 % intervals and verdict
   Pref - kw dw);
 * ``playback``: the converter's own model played back with the recorded voltage imposed and
   M, D fitted to the recorded P and Q (``jd.calibrate`` on ``jd.GfmUnit``), the other constants
-  from the record.
+  from the record. Its verdict here: ``identified`` when the fit converged and H's 95 % interval
+  is within +-10 % (the machine verdict's threshold), ``weakly identified`` within +-50 %, else
+  ``not identified`` (the machine verdict's other checks, replay and D = 0, are not applied).
 
     python experiments/andes_gfm/run.py [--x-internal 0.2]
 

@@ -28,17 +28,16 @@ N_FRAMES = 301
 _play = eqx.filter_jit(play_back)
 
 
-def _read(name):
-    with gzip.open(DATA / name, "rt") as fh:
+def _read(name, folder=DATA):
+    with gzip.open(folder / name, "rt") as fh:
         header = fh.readline().strip().split(",")
         body = np.loadtxt(fh, delimiter=",")
     return {k: body[:, j] for j, k in enumerate(header)}
 
 
-@pytest.fixture(scope="module")
-def line_trip():
-    meta = json.loads((DATA / "truth.json").read_text())
-    rec, truth = _read("line_trip.csv.gz"), _read("line_trip_truth.csv.gz")
+def _line_trip(folder):
+    meta = json.loads((folder / "truth.json").read_text())
+    rec, truth = _read("line_trip.csv.gz", folder), _read("line_trip_truth.csv.gz", folder)
     keep = (rec["time_s"] >= T0_S - 1e-9) & (rec["time_s"] <= T1_S + 1e-9)
     tag = meta["tag"]
     v = rec[f"{tag}/VM"] * np.exp(1j * np.deg2rad(rec[f"{tag}/VA"]))
@@ -48,6 +47,11 @@ def line_trip():
                             jnp.real(i), jnp.imag(i))
     assert series.t_s.shape == (N_FRAMES,)
     return meta, series, truth["omega_pu"][keep], v * np.conj(i)
+
+
+@pytest.fixture(scope="module")
+def line_trip():
+    return _line_trip(DATA)
 
 
 @pytest.mark.parametrize("inner", ["pi", "lag"])
@@ -99,12 +103,14 @@ def test_andes_names_and_refusals():
         REGCV1(m_s=0.0)
 
 
-def test_playback_matches_andes(line_trip):
+@pytest.mark.parametrize("model", ["REGCV1", "REGCV2"])
+def test_playback_matches_andes(model, line_trip):
     """With ANDES's recorded terminal voltage imposed, the module's virtual rotor speed follows
     ANDES's within 2 % of its swing, and P and Q within 0.2 % of Sn (RMS, frames after the
-    switching instant's interval)."""
-    meta, series, omega, s = line_trip
-    r = _play(GfmUnit(gfm_from_andes("REGCV1", meta["constants"])), series)
+    switching instant's interval). REGCV2: its own ANDES line trip (``regcv2/``)."""
+    meta, series, omega, s = line_trip if model == "REGCV1" else _line_trip(DATA / "regcv2")
+    assert meta["model"] == model
+    r = _play(GfmUnit(gfm_from_andes(model, meta["constants"])), series)
     assert bool(r.ok)
     after = np.asarray(series.t_s) > 10.0 + 1.5 / 60
     swing = np.ptp(omega)
