@@ -9,6 +9,8 @@ equivalent for the estimator is :func:`classical_plant`.
 
 from __future__ import annotations
 
+import math
+
 import equinox as eqx
 
 from .._core.machine import Machine
@@ -62,11 +64,16 @@ def classical_plant(converter: REGCV1, s_rated_mva: float, v_rated_kv: float,
     R = 1/kw, or :data:`NO_DROOP_R_PU` for kw = 0, and no lags worth speaking of), the PMU at
     the terminal (give the recording ``location="terminal"``).
 
-    The estimator then identifies H = M/2 and D (+ kw where the droop is not modelled) of the
-    swing equation M dw/dt = Pref - Pe - D dw, with Pe the measured terminal power.
+    This fits a VSG whose internal voltage behind x turns with its virtual rotor: the estimator
+    then sees the swing equation M dw/dt = Pref - Pe - D dw (H = M/2) with Pe the measured
+    terminal power (not tested on such a model). It does not fit ANDES's REGCV1, whose d axis
+    follows the terminal voltage through its voltage PI: on every recording of
+    experiments/andes_gfm the estimator's verdict with this plant was ``failed`` (H = 139, -29,
+    -252 s against 4 s); identify REGCV1 by its playback (:class:`GfmUnit` with
+    :func:`~jaxdse._dyr.calibrate.calibrate`) instead.
     """
     x = float(converter.xs_pu) if x_internal_pu is None else float(x_internal_pu)
-    f0 = float(converter.omega_s_rad_s) / (2 * 3.141592653589793)
+    f0 = float(converter.omega_s_rad_s) / (2 * math.pi)
     kw = float(converter.kw_pu)
     machine = Machine(xd_pu=x, xq_pu=x, xd1_pu=x, rs_pu=float(converter.ra_pu), td01_s=1e4,
                       s_rated_mva=s_rated_mva, v_rated_kv=v_rated_kv, f_nominal_hz=f0)

@@ -103,7 +103,8 @@ class PlaybackResult(eqx.Module):
     """Rotor speed [pu] (a grid-forming converter's virtual rotor; NaN for a grid-following
     inverter-based plant: not applicable)."""
     delta_rad: Array
-    """Rotor angle (q axis) in the nominal frame [rad] (NaN for an inverter-based plant)."""
+    """Rotor angle (q axis) in the nominal frame [rad] (a grid-forming converter's: its virtual
+    d axis; NaN for a grid-following inverter-based plant)."""
     efd_pu: Array
     """Field voltage [pu] (NaN for an inverter-based plant)."""
     tm_pu: Array
