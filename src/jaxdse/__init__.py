@@ -77,6 +77,8 @@ from ._dyr.calibrate import measured_pq as measured_pq
 from ._dyr.calibrate import rank as rank
 from ._dyr.calibrate import stack_events as stack_events
 from ._dyr.calibrate import with_values as with_values
+from ._dyr.gfm_unit import GfmUnit as GfmUnit
+from ._dyr.gfm_unit import classical_plant as classical_plant
 from ._dyr.ibr_unit import IbrUnit as IbrUnit
 from ._dyr.playback import PlaybackResult as PlaybackResult
 from ._dyr.playback import PlaybackSettings as PlaybackSettings
@@ -141,6 +143,8 @@ from ._models.governors import WSIEG1 as WSIEG1
 from ._models.governors import WeightedGovernor as WeightedGovernor
 from ._models.ibr import IBR_FIELDS as IBR_FIELDS
 from ._models.ibr import IBR_MODELS as IBR_MODELS
+from ._models.ibr import REGCV1 as REGCV1
+from ._models.ibr import gfm_from_andes as gfm_from_andes
 from ._models.ibr import REECA1 as REECA1
 from ._models.ibr import REECB1 as REECB1
 from ._models.ibr import REECCU1 as REECCU1

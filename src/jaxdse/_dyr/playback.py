@@ -21,6 +21,8 @@ from jaxtyping import Array, Float
 
 from .._core.lti import zero_phase_lowpass
 from .._core.signals import jumps
+from .._models.ibr import GfmReferences
+from .gfm_unit import GfmUnit
 from .ibr_unit import IbrReferences, IbrUnit
 from .stiff import kvaerno5
 from .unit import DyrUnit, UnitInputs, UnitReferences
@@ -98,14 +100,16 @@ class PlaybackResult(eqx.Module):
     q_pu: Array
     """Reactive power out of the terminal [pu]."""
     omega_pu: Array
-    """Rotor speed [pu] (NaN for an inverter-based plant: not applicable)."""
+    """Rotor speed [pu] (a grid-forming converter's virtual rotor; NaN for a grid-following
+    inverter-based plant: not applicable)."""
     delta_rad: Array
-    """Rotor angle (q axis) in the nominal frame [rad] (NaN for an inverter-based plant)."""
+    """Rotor angle (q axis) in the nominal frame [rad] (a grid-forming converter's: its virtual
+    d axis; NaN for a grid-following inverter-based plant)."""
     efd_pu: Array
     """Field voltage [pu] (NaN for an inverter-based plant)."""
     tm_pu: Array
     """Mechanical torque [pu] (NaN for an inverter-based plant)."""
-    references: UnitReferences | IbrReferences
+    references: UnitReferences | IbrReferences | GfmReferences
     ok: Array
     """True when the solver reached the end with finite states."""
 
@@ -228,15 +232,18 @@ def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> Terminal
     return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
 
 
-def play_back(unit: DyrUnit | IbrUnit, series: TerminalSeries,
+def play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
               settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
-    """Simulate ``unit`` (a machine's :class:`DyrUnit` or an inverter-based plant's
-    :class:`IbrUnit`) with the recorded terminal voltage imposed (PLBVFU1 convention); the
-    frequency deviation an inverter-based plant sees is the recorded angle's slope."""
+    """Simulate ``unit`` (a machine's :class:`DyrUnit`, an inverter-based plant's
+    :class:`IbrUnit` or a grid-forming converter's :class:`GfmUnit`) with the
+    recorded terminal voltage imposed (PLBVFU1 convention); the frequency deviation an
+    inverter-based plant sees is the recorded angle's slope. A grid-forming converter's
+    ``omega_pu`` and ``delta_rad`` are its virtual rotor's."""
     series = steady_start(series, settings)
     ts = series.t_s
     ibr = isinstance(unit, IbrUnit)
-    omega_s = unit.omega_s_rad_s if ibr else unit.machine.omega_s_rad_s
+    gfm = isinstance(unit, GfmUnit)
+    omega_s = unit.omega_s_rad_s if (ibr or gfm) else unit.machine.omega_s_rad_s
     u0, i_re0, i_im0 = initial_operating_point(series, settings)
     y0, refs = unit.initial_state(u0, i_re0, i_im0)
     inputs = _input_function(series, settings, omega_s)
@@ -274,6 +281,9 @@ def play_back(unit: DyrUnit | IbrUnit, series: TerminalSeries,
         ys, solved = sol.ys, sol.result == diffrax.RESULTS.successful
 
     def outputs(s, y):
+        if gfm:
+            sig = unit.signals(y, inputs(*_frame_of(s)), refs)
+            return sig.p_pu, sig.q_pu, sig.omega_pu, sig.delta_rad
         if ibr:
             sig = unit.signals(y, inputs(*_frame_of(s)), refs)
             return sig.p_pu, sig.q_pu, jnp.nan * sig.p_pu, jnp.nan * sig.p_pu
@@ -282,6 +292,10 @@ def play_back(unit: DyrUnit | IbrUnit, series: TerminalSeries,
 
     p, q, efd, tm = jax.vmap(outputs)(jnp.arange(ts.shape[0], dtype=ts.dtype), ys)
     ok = solved & jnp.all(jnp.isfinite(ys))
+    if gfm:  # (efd, tm are omega, delta here; the field voltage and torque do not apply)
+        nan = jnp.nan * p
+        return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=efd, delta_rad=tm, efd_pu=nan,
+                              tm_pu=nan, references=refs, ok=ok)
     if ibr:
         return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=efd, delta_rad=efd, efd_pu=efd,
                               tm_pu=tm, references=refs, ok=ok)

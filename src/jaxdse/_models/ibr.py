@@ -935,6 +935,221 @@ class REPCA1(eqx.Module):
 
 # --- PSS/E records ----------------------------------------------------------------------------
 
+# --- REGCV1 / REGCV2 (grid-forming) --------------------------------------------------------------
+
+class GfmInputs(NamedTuple):
+    """What a grid-forming converter sees at one instant (machine base, network frame)."""
+
+    v_re_pu: Array
+    """Terminal voltage, real part [pu] (frame rotating at nominal frequency)."""
+    v_im_pu: Array
+    """Terminal voltage, imaginary part [pu]."""
+
+
+class GfmReferences(NamedTuple):
+    """The set points that hold the initial steady state (constant during a playback)."""
+
+    p_ref_pu: Array
+    """Pref: active-power reference of the swing equation [pu on Sn] (ANDES: gammap p0s)."""
+    q_ref_pu: Array
+    """Qref: reactive-power reference of the Q-V droop [pu on Sn]."""
+    v_ref_pu: Array
+    """vref: terminal-voltage reference [pu] (ANDES: the static generator's set point)."""
+    id0_pu: Array
+    """Initial d-axis current [pu] (initial value of the vd PI's integrator)."""
+    iq0_pu: Array
+    """Initial q-axis current [pu] (initial value of the vq PI's integrator)."""
+
+
+class GfmSignals(NamedTuple):
+    """A grid-forming converter's outputs at one instant (machine base)."""
+
+    i_re_pu: Array
+    """Current out of the terminal, real part, network frame [pu]."""
+    i_im_pu: Array
+    p_pu: Array
+    """Active power out of the terminal [pu] (Pe of the swing equation)."""
+    q_pu: Array
+    """Reactive power out of the terminal [pu]."""
+    omega_pu: Array
+    """Virtual rotor speed 1 + dw [pu]."""
+    delta_rad: Array
+    """Virtual rotor angle in the network frame [rad] (the d axis)."""
+    vd_pu: Array
+    vq_pu: Array
+    id_pu: Array
+    iq_pu: Array
+
+
+class REGCV1(eqx.Module):
+    """ANDES REGCV1: a voltage-source converter with virtual-synchronous-generator control
+    (ANDES 2.0 model reference, ``andes/models/renewable/regcv1.py``; the names are ANDES's).
+
+    Block diagram (per unit on Sn; rotor frame: V e^{-j delta} = vd + j vq, I e^{-j delta} =
+    Id + j Iq, current out of the terminal):
+
+        swing:     M d(dw)/dt = Pref - kw dw - Pe - D dw,   d(delta)/dt = omega_s dw,
+                   Pe = vd Id + vq Iq,  Qe = vq Id - vd Iq   (terminal powers; no 1/omega)
+        Q droop:   vref2 = vref + kv (Qref - Qe)
+        outer PI:  Idref = PI(Kpvd, Kivd)(vd - vref2),  Iqref = PI(Kpvq, Kivq)(vq)
+        inner PI:  udref = PI(KpId, KiId)(Id - Idref) + vd - xs Iqref,
+                   uqref = PI(KpIq, KiIq)(Iq - Iqref) + vq + xs Idref
+        modulator: ud = 1/(1 + s Tc) udref,  uq = 1/(1 + s Tc) uqref
+        source:    ud + j uq = (vd + j vq) + (ra + j xs)(Id + j Iq)   (internal voltage behind
+                   ra + j xs, which gives Id, Iq from the states and V)
+
+    PI(kp, ki)(u) = kp u + x with dx/dt = ki u. States: [dw, delta, x_vd, x_vq, x_Id, x_Iq,
+    ud, uq]. The swing equation's "rotor" is the virtual one: delta is the angle of the d axis,
+    along the terminal voltage in steady state (vq = 0), not the angle of the internal voltage.
+    REGCV2 (``inner = "lag"``) replaces the inner PI and the modulator with first-order lags of
+    the current references: Id = 1/(1 + s Tid) Idref, Iq = 1/(1 + s Tiq) Iqref (states 6, 7 are
+    then Id, Iq; x_Id, x_Iq stay at 0).
+    """
+
+    inner: str = eqx.field(static=True, default="pi")
+    """"pi": REGCV1 (inner current PI + modulator lag); "lag": REGCV2 (current lags)."""
+    m_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """M: emulated starting time M = 2H [s] (> 0)."""
+    d_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """D: emulated damping [pu power / pu speed] (>= 0)."""
+    kw_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """kw: frequency droop on active power, reciprocal of the droop [pu power / pu speed]."""
+    kv_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """kv: reactive-power droop on the voltage reference [pu voltage / pu Q]."""
+    ra_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """ra: resistance between the internal voltage and the terminal [pu on Sn]."""
+    xs_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """xs: reactance between the internal voltage and the terminal [pu on Sn] (> 0)."""
+    t_c_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """Tc: modulator (switching) lag [s] (REGCV1; > 0)."""
+    kpvd: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """Kpvd: vd PI proportional gain [pu current / pu voltage]."""
+    kivd: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Kivd: vd PI integral gain [pu current / (pu voltage s)]."""
+    kpvq: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """Kpvq: vq PI proportional gain [pu current / pu voltage]."""
+    kivq: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """Kivq: vq PI integral gain [pu current / (pu voltage s)]."""
+    kpid: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """KpId: Id PI proportional gain [pu voltage / pu current] (REGCV1)."""
+    kiid: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """KiId: Id PI integral gain [pu voltage / (pu current s)] (REGCV1)."""
+    kpiq: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """KpIq: Iq PI proportional gain [pu voltage / pu current] (REGCV1)."""
+    kiiq: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """KiIq: Iq PI integral gain [pu voltage / (pu current s)] (REGCV1)."""
+    t_id_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """Tid: Id lag [s] (REGCV2; > 0)."""
+    t_iq_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """Tiq: Iq lag [s] (REGCV2; > 0)."""
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * math.pi * 60.0)
+    """Nominal angular frequency 2 pi fn [rad/s]."""
+
+    n_states = 8
+
+    def __check_init__(self):
+        if self.inner not in ("pi", "lag"):
+            raise ValueError(f"REGCV1.inner must be 'pi' or 'lag', got {self.inner!r}")
+        check_positive(self, "m_s", "xs_pu", "t_c_s", "t_id_s", "t_iq_s", "omega_s_rad_s")
+        check_nonnegative(self, "d_pu", "kw_pu", "kv_pu", "ra_pu")
+
+    @property
+    def h_s(self):
+        """The emulated inertia constant H = M/2 [s]."""
+        return self.m_s / 2
+
+    def _rotor_frame(self, y, u: GfmInputs):
+        c, s = jnp.cos(y[1]), jnp.sin(y[1])
+        return u.v_re_pu * c + u.v_im_pu * s, u.v_im_pu * c - u.v_re_pu * s
+
+    def _currents(self, y, vd, vq):
+        if self.inner == "lag":
+            return y[6], y[7]
+        # (ra + j xs)(Id + j Iq) = (ud - vd) + j (uq - vq)
+        a, b = y[6] - vd, y[7] - vq
+        det = self.ra_pu**2 + self.xs_pu**2
+        return (self.ra_pu * a + self.xs_pu * b) / det, (self.ra_pu * b - self.xs_pu * a) / det
+
+    def signals(self, y, u: GfmInputs, refs: GfmReferences) -> GfmSignals:
+        """The outputs at state ``y`` under terminal voltage ``u``."""
+        vd, vq = self._rotor_frame(y, u)
+        i_d, i_q = self._currents(y, vd, vq)
+        c, s = jnp.cos(y[1]), jnp.sin(y[1])
+        return GfmSignals(i_d * c - i_q * s, i_d * s + i_q * c, vd * i_d + vq * i_q,
+                          vq * i_d - vd * i_q, 1.0 + y[0], y[1], vd, vq, i_d, i_q)
+
+    def vector_field(self, y, u: GfmInputs, refs: GfmReferences):
+        """d(state)/dt under terminal voltage ``u``."""
+        sig = self.signals(y, u, refs)
+        dw = y[0]
+        vref2 = refs.v_ref_pu + self.kv_pu * (refs.q_ref_pu - sig.q_pu)
+        e_vd, e_vq = sig.vd_pu - vref2, sig.vq_pu
+        id_ref = self.kpvd * e_vd + y[2]
+        iq_ref = self.kpvq * e_vq + y[3]
+        d_dw = (refs.p_ref_pu - self.kw_pu * dw - sig.p_pu - self.d_pu * dw) / self.m_s
+        d_delta = self.omega_s_rad_s * dw
+        if self.inner == "lag":
+            zero = jnp.zeros_like(dw)
+            d_x, d_y = zero, zero
+            d6 = (id_ref - sig.id_pu) / self.t_id_s
+            d7 = (iq_ref - sig.iq_pu) / self.t_iq_s
+        else:
+            e_id, e_iq = sig.id_pu - id_ref, sig.iq_pu - iq_ref
+            d_x, d_y = self.kiid * e_id, self.kiiq * e_iq
+            udref = self.kpid * e_id + y[4] + sig.vd_pu - self.xs_pu * iq_ref
+            uqref = self.kpiq * e_iq + y[5] + sig.vq_pu + self.xs_pu * id_ref
+            d6 = (udref - y[6]) / self.t_c_s
+            d7 = (uqref - y[7]) / self.t_c_s
+        return jnp.stack([d_dw, d_delta, self.kivd * e_vd, self.kivq * e_vq, d_x, d_y, d6, d7])
+
+    def initial_state(self, u: GfmInputs, i_re, i_im):
+        """(state, references): the steady state that delivers current ``I`` (out of the
+        terminal, network frame) at ``u``'s voltage: dw = 0, the d axis along V (vq = 0),
+        Pref = P, Qref = Q, vref = |V| (as ANDES initialises from its power flow)."""
+        vt = jnp.hypot(u.v_re_pu, u.v_im_pu)
+        delta = jnp.arctan2(u.v_im_pu, u.v_re_pu)
+        p = u.v_re_pu * i_re + u.v_im_pu * i_im
+        q = u.v_im_pu * i_re - u.v_re_pu * i_im
+        i_d, i_q = p / vt, -q / vt
+        zero = jnp.zeros_like(vt)
+        if self.inner == "lag":
+            x_id, x_iq, s6, s7 = zero, zero, i_d, i_q
+        else:
+            # inner PI integrators: udref = ud with Id = Idref, Iq = Iqref
+            x_id, x_iq = self.ra_pu * i_d, self.ra_pu * i_q
+            s6 = vt + self.ra_pu * i_d - self.xs_pu * i_q
+            s7 = self.ra_pu * i_q + self.xs_pu * i_d
+        y0 = jnp.stack([zero, delta, i_d, i_q, x_id, x_iq, s6, s7])
+        return y0, GfmReferences(p, q, vt, i_d, i_q)
+
+
+REGCV1_FIELDS: dict[str, str] = {
+    "M": "m_s", "D": "d_pu", "kw": "kw_pu", "kv": "kv_pu", "ra": "ra_pu", "xs": "xs_pu",
+    "Tc": "t_c_s", "Kpvd": "kpvd", "Kivd": "kivd", "Kpvq": "kpvq", "Kivq": "kivq",
+    "KpId": "kpid", "KiId": "kiid", "KpIq": "kpiq", "KiIq": "kiiq", "Tid": "t_id_s",
+    "Tiq": "t_iq_s"}
+"""ANDES parameter name -> REGCV1 field (REGCV2 adds Tid, Tiq and has no KpId..KiIq, Tc)."""
+
+
+def gfm_from_andes(model: str, params: dict, fn_hz: float = 60.0) -> REGCV1:
+    """The module of an ANDES grid-forming record (``model`` REGCV1 or REGCV2) from its
+    parameters by ANDES name (on the device base Sn; ``Sn``, ``fn``, ``gammap``, ``gammaq``,
+    ``bus``, ``gen``, ``idx``, ``u`` are read elsewhere or ignored). Unknown names raise a
+    one-line ValueError."""
+    name = str(model).strip().upper()
+    if name not in ("REGCV1", "REGCV2"):
+        raise ValueError(f"{model!r} is not a supported grid-forming model (REGCV1, REGCV2)")
+    kwargs = {}
+    for key, value in params.items():
+        if key in ("Sn", "fn", "gammap", "gammaq", "bus", "gen", "idx", "u", "name", "coi2"):
+            continue
+        if key not in REGCV1_FIELDS:
+            raise ValueError(f"{name}: unknown parameter {key!r} ({', '.join(REGCV1_FIELDS)})")
+        kwargs[REGCV1_FIELDS[key]] = float(value)
+    fn = float(params.get("fn", fn_hz))
+    return REGCV1(inner="lag" if name == "REGCV2" else "pi", omega_s_rad_s=2 * math.pi * fn, **kwargs)
+
+
 IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REGCB1": REGCB1, "REECA1": REECA1,
                                             "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1}
 """The inverter-based resource models by their PSS/E name."""
@@ -1090,7 +1305,9 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         raise ValueError(record_message(msg, name, fields)) from None
 
 
-__all__ = ["REECB1", "REECCU1", "REGCB1", "VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+__all__ = ["GfmInputs", "GfmReferences", "GfmSignals", "REECB1", "REECCU1", "REGCB1", "REGCV1", "REGCV1_FIELDS",
+           "gfm_from_andes", "VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS",
+           "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
            "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
