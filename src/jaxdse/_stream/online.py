@@ -227,6 +227,9 @@ class OnlineGroup:
                                 self.size)
         ring = jax.tree_util.tree_map(
             lambda b: jnp.zeros((b.shape[0], self.window.blocks) + b.shape[1:], b.dtype), blocks)
+        mask = jnp.ones(self.u, bool)
+        _where(mask, (blocks, carries), (blocks, carries))       # _chunks' two uses of it
+        _where(mask, carries, carries)
         jax.block_until_ready(_absorb(ring, jnp.zeros(self.u, jnp.int32), blocks, jnp.ones(self.u, bool), carries,
                                       self.plants, self.ident, self.window, self.verdict_settings))
 
@@ -258,8 +261,11 @@ class OnlineGroup:
     # --- chunks ------------------------------------------------------------------------------
 
     def _slices(self, units, span):
-        cols = (self.slice_start[units] - self.base)[:, None] + np.arange(span)[None, :]
-        x = self.buf[:, units[:, None], cols]                     # [5, k, span]
+        starts = self.slice_start[units] - self.base
+        if units.size == self.u and np.all(units == np.arange(self.u)) and np.all(starts == starts[0]):
+            x = self.buf[:, :, starts[0]:starts[0] + span].copy()    # every unit at one column: a block copy
+        else:
+            x = self.buf[:, units[:, None], starts[:, None] + np.arange(span)[None, :]]   # [5, k, span]
         t = np.arange(span) * self.dt
         f = x[4] if self.with_frequency else None
         return Recording(t_s=np.broadcast_to(t, x.shape[1:]).copy(), v_mag_pu=x[0], v_ang_rad=x[1],
@@ -343,8 +349,10 @@ class OnlineGroup:
         return out
 
 
+@jax.jit
 def _where(mask, a, b):
-    """Per unit (leading axis): a where ``mask``, else b."""
+    """Per unit (leading axis): a where ``mask``, else b (one compiled call for the whole
+    pytree: eager, each leaf was a dispatch of its own)."""
     return jax.tree_util.tree_map(
         lambda x, y: jnp.where(mask.reshape((-1,) + (1,) * (jnp.ndim(x) - 1)), x, y), a, b)
 
