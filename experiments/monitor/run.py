@@ -23,7 +23,8 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   median H of the last update before and of the first after it, and any update that names an H
   whose interval misses the batch interval;
 * ``capacity``: 1, 22 and 506 units at 30 frames/s (OSL, tiled 23x) and 1, 20 and 500 at 60
-  frames/s (npcc, tiled 2x and 50x), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
+  frames/s (npcc, tiled 2x and 50x), then 5,016 at 30 frames/s (OSL tiled 228x on 6 streams,
+  with [inertia]: ``INTERCONNECTION``), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
   the main thread's processing time per frame against the frame period, and the delay from a
   frame's timestamp to its estimate (median, 99th percentile, largest). A run keeps up when
   its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``; the last frames, flushed
@@ -527,13 +528,19 @@ def report(doc) -> str:
     c = doc.get("capacity")
     if c:
         lines += [f"## Latency and capacity ({c['seconds']:g} s each, real time, window 30 s)", "",
-                  "| frames/s | units | frame period [ms] | processing per frame median / 99 % [ms] | busy "
-                  "fraction | delay median / 99 % / max [s] | keeps up |", "|---|---|---|---|---|---|---|"]
+                  "| frames/s | units | streams | frame period [ms] | processing per frame median / 99 % [ms] | "
+                  "CPU per frame median / 99 % [ms] | busy fraction | delay median / 99 % / max [s] | "
+                  "area estimate delay median / 99 % [s] | peak memory [MiB] | keeps up |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in c["rows"]:
             p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
-            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r['frame_period_ms']:.1f} | "
-                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(r['busy_fraction'], '.2f')} | "
-                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | {r['keeps_up']} |")
+            cpu, e = r.get("processing_cpu_ms_per_frame") or {}, r.get("inertia_delay_s") or {}
+            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r['frame_period_ms']:.1f} | "
+                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(cpu.get('median'))} / {_f(cpu.get('p99'))} | "
+                         f"{_f(r['busy_fraction'], '.2f')} | "
+                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | "
+                         f"{_f(e.get('median'))} / {_f(e.get('p99'))} | {_f(r.get('peak_rss_mib'), '.0f')} | "
+                         f"{r['keeps_up']} |")
         lines.append("")
     return "\n".join(lines)
 
