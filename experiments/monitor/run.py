@@ -418,7 +418,7 @@ def _capacity_interconnection(work) -> dict:
         try:
             ports = []
             for _ in range(streams):
-                proc, port = serve(OSL, "--tile", str(per), "--duration", str(seconds + 300.0))
+                proc, port = serve(OSL, "--tile", str(per), "--loop", "--duration", str(seconds + 300.0))
                 procs.append(proc)
                 ports.append(port)
             cfg.write_text(interconnection_toml(bases, ports, per))
