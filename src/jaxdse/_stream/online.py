@@ -149,7 +149,7 @@ class OnlineGroup:
         self.started = np.zeros(self.u, bool)             # the segment's first chunk is done
         self.carries = None
         self.ring = None
-        self.filled = jnp.zeros(self.u, jnp.int32)
+        self.filled = np.zeros(self.u, np.int32)   # blocks in each ring (host: a restart is no device op)
         self.last_h = [None] * self.u
         self.last_h_t = [None] * self.u
 
@@ -202,12 +202,13 @@ class OnlineGroup:
 
     def _restart(self, units: np.ndarray, index: int):
         """A new segment for ``units`` (indices) from grid ``index``: their first slice starts at
-        the next chunk boundary of the grid (one update of the device's counts for them all)."""
+        the next chunk boundary of the grid (host arrays only: an eager device scatter was compiled
+        anew for each number of units restarting at once, seconds on a loaded machine)."""
         self.segment[units] += 1
         self.seg_start[units] = index
         self.slice_start[units] = -(-index // self.size) * self.size
         self.started[units] = False
-        self.filled = self.filled.at[units].set(0)
+        self.filled[units] = 0
 
     def warm_up(self):
         """Run the group's three programs once on a flat batch (1 pu, the nominal frequency) and
@@ -306,9 +307,10 @@ class OnlineGroup:
                 lambda b: jnp.zeros((b.shape[0], self.window.blocks) + b.shape[1:], b.dtype), blocks)
         else:
             self.carries = _where(jnp.asarray(ready), carries, self.carries)
-        self.ring, self.filled, idents, verdicts = _absorb(
+        self.ring, filled, idents, verdicts = _absorb(
             self.ring, self.filled, blocks, jnp.asarray(ready), self.carries, self.plants, self.ident,
             self.window, self.verdict_settings)
+        self.filled = np.array(filled)
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
         self.started |= ready
         self.slice_start = np.where(ready, self.slice_start + self.size, self.slice_start)
