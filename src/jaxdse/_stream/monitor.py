@@ -729,8 +729,8 @@ with open(sys.argv[1], "a") as out:
 class CsvRows:
     """A CSV file of float rows: a header, then each row in %.17g (every float64 reads back
     exactly; NaN as nan). Rows of ``ROWS_IN_A_PROCESS`` values or more are formatted by a child
-    Python process (fed their bytes through a pipe): at 5,000 units the text of a second of
-    frames costs about 0.4 s of CPU, which would hold the monitor's main thread; the file is
+    Python process (fed their bytes through a pipe): 0.5 us of CPU a value, at 5,000 units half
+    a second for each second of frames, which would hold the monitor's main thread; the file is
     the same byte for byte. ``in_process``: force the one or the other (None: by the size)."""
 
     def __init__(self, path: Path, header: list[str], in_process: bool | None = None):
