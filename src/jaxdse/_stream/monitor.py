@@ -405,9 +405,9 @@ SUMMARY_KEYS = {
                  "frame (the estimate's own wait: its lookahead and the reorder buffer) plus this times the pace",
     "pace": "per stream, stream seconds per wall second (1 in real time; 5 for pmu-sim --speed 5)",
     "processing_ms_per_frame": "the main thread's time per data frame, its updates included [ms]",
-    "processing_cpu_ms_per_frame": "the main thread's CPU time per data frame, its updates included [ms] (as "
-                                   "processing_ms_per_frame, less the time other threads and processes held the "
-                                   "cores)",
+    "processing_cpu_ms_per_frame": "the main thread's CPU time per data frame, its updates included [ms] "
+                                   "(processing_ms_per_frame less the time other threads and processes "
+                                   "held the cores)",
     "inertia_delay_s": "with [inertia], per set of area lines, stream seconds from the lines' time to their "
                        "emission (the area estimate holds each unit's latest update, itself delay_s after its "
                        "window's last frame)",
@@ -600,7 +600,8 @@ class _Stream:
         name = f"recording_{self.k}_{len(self.parts) + 1}.csv"
         self.parts.append({"file": name, "stream": self.k, "frame_rate_hz": self.rate, "index0": None,
                            "units": [u.name for u in self.units]})
-        self.file = CsvRows(self.out_dir / name, ["time_s"] + [f"{u.name}/{c}" for u in self.units for c in COLUMNS])
+        self.file = CsvRows(self.out_dir / name,
+                            ["time_s"] + [f"{u.name}/{c}" for u in self.units for c in COLUMNS])
 
     # data
     def on_data(self, frame: c3.DataFrame) -> list[Update]:
