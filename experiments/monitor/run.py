@@ -26,7 +26,8 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   at ``--speed`` 1 (100 s) and 5 (70 s): the delay of the updates in stream seconds, median and
   99th percentile, and their difference between the two speeds;
 * ``capacity``: 1, 22 and 506 units at 30 frames/s (OSL, tiled 23x) and 1, 20 and 500 at 60
-  frames/s (npcc, tiled 2x and 50x), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
+  frames/s (npcc, tiled 2x and 50x), then 5,016 at 30 frames/s (OSL tiled 228x on 6 streams,
+  with [inertia]: ``INTERCONNECTION``), real time for ``CAPACITY_S`` seconds, ``window_s`` 30:
   the main thread's processing time per frame against the frame period, and the delay from a
   frame's timestamp to its estimate (median, 99th percentile, largest). A run keeps up when
   its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``; the last frames, flushed
@@ -43,6 +44,7 @@ import json
 import os
 import platform
 import re
+import resource
 import shutil
 import subprocess
 import sys
@@ -355,14 +357,84 @@ def part_capacity(work):
                 finally:
                     proc.terminate()
                     proc.wait(timeout=30)
-            p = s["processing_ms_per_frame"] or {}
-            d = s["delay_s"] or {}
-            rows.append({"frames_per_s": rate, "units": len(s["latest"]) if s["latest"] else n, "units_served": n,
-                         "frame_period_ms": 1e3 / rate, "processing_ms_per_frame": p, "delay_s": d,
-                         "updates": s["updates"], "wall_s": round(wall, 1),
-                         "busy_fraction": p.get("mean", np.nan) * rate / 1e3 if p else None,
-                         "keeps_up": bool(d) and d.get("max", np.inf) <= KEEP_UP_DELAY_S})
+            rows.append(_capacity_row(s, rate, n, 1, wall))
+    rows.append(_capacity_interconnection(work))
     return {"rows": rows, "seconds": CAPACITY_S, "keep_up_delay_s": KEEP_UP_DELAY_S}
+
+
+def _capacity_row(s: dict, rate: int, n: int, streams: int, wall: float, cpu_s: float | None = None) -> dict:
+    p = s["processing_ms_per_frame"] or {}
+    d = s["delay_s"] or {}
+    return {"frames_per_s": rate, "units": len(s["latest"]) if s["latest"] else n, "units_served": n,
+            "streams": streams, "frame_period_ms": 1e3 / rate, "processing_ms_per_frame": p,
+            "processing_cpu_ms_per_frame": s.get("processing_cpu_ms_per_frame"), "delay_s": d,
+            "inertia_delay_s": s.get("inertia_delay_s"), "updates": s["updates"], "wall_s": round(wall, 1),
+            "process_cpu_s": None if cpu_s is None else round(cpu_s, 1),
+            "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
+            "busy_fraction": p.get("mean", np.nan) * rate / 1e3 if p else None,
+            "keeps_up": bool(d) and d.get("max", np.inf) <= KEEP_UP_DELAY_S}
+
+
+INTERCONNECTION = (6, 38)
+"""The whole-interconnection case (issue 45): OSL case 1's 22 plants tiled 228 times (5,016
+units, 4,560 served: 1034_sjuan is refused by the readers), at 30 frames/s, with [inertia]
+(every area's E each second), over 6 concentrator streams of 38 copies each. One C37.118.2
+stream cannot carry them: a data frame is at most 65,535 bytes (FRAMESIZE) and a station takes
+at least 14 (26 as pmu-sim serves it, polar floats), and CFG-2, about 70 bytes a station,
+holds at most about 930 stations."""
+
+
+def interconnection_toml(bases: list[str], ports: list[int], per: int) -> str:
+    """The monitor file of ``_capacity_interconnection``: stream k (on ``ports[k]``) carries
+    copies k per + 1 .. k per + per of the plants ``bases``, as stations of the names
+    ``jaxdse pmu-sim --tile per`` gives them (copy 1 as the plant, copy c as ``name~c``)."""
+    text = f'fleet = "{OSL}"\nupdate_s = 1.0\nwindow_s = 30.0\ntile = {len(ports) * per}\n[inertia]\n'
+    for k, port in enumerate(ports):
+        units, stations = [], {}
+        for c in range(per):
+            for b in bases:
+                name = b if k * per + c == 0 else f"{b}~{k * per + c + 1}"
+                units.append(name)
+                stations[name] = b if c == 0 else f"{b}~{c + 1}"
+        text += (f"[[stream]]\nport = {port}\ntimeout_s = 3.0\nfrequency = \"angle\"\n"
+                 f"units = {json.dumps(units)}\nstations = {{"
+                 + ", ".join(f"{json.dumps(u)} = {json.dumps(st)}" for u, st in stations.items()) + "}\n")
+    return text
+
+
+def _capacity_interconnection(work) -> dict:
+    """5,016 units on 6 streams (``INTERCONNECTION``), real time, with [inertia]: each
+    ``jaxdse pmu-sim --tile 38`` serves stations ``name``, ``name~2`` .. ``name~38``; stream k's
+    units are copies 38 k + 1 .. 38 k + 38, mapped to them by ``[stream.stations]``. The row
+    adds the main thread's CPU time per frame, the process's CPU time during the run, the delay
+    from a frame to the area estimate (``inertia_delay_s``) and the peak resident memory of this
+    process (``ru_maxrss``: the monitor runs in it; the largest case runs last)."""
+    streams, per = INTERCONNECTION
+    tile = streams * per
+    out = work / f"capacity_30_{22 * tile}"
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = out / "monitor.toml"
+    cfg.write_text(f'fleet = "{OSL}"\n')
+    bases = [u.name for u in jd.load_monitor(cfg).units]
+    for seconds in (WARM_UP_S, CAPACITY_S):    # the first compiles (the jit cache is the process's)
+        procs = []
+        try:
+            ports = []
+            for _ in range(streams):
+                proc, port = serve(OSL, "--tile", str(per), "--loop", "--duration", str(seconds + 300.0))
+                procs.append(proc)
+                ports.append(port)
+            cfg.write_text(interconnection_toml(bases, ports, per))
+            t, c0 = time.perf_counter(), time.process_time()
+            s = jd.Monitor(jd.load_monitor(cfg), out / "live", log=lambda x: None,
+                           console=lambda x: None).run(seconds + 3.0)
+            wall, cpu = time.perf_counter() - t, time.process_time() - c0
+        finally:
+            for proc in procs:
+                proc.terminate()
+            for proc in procs:
+                proc.wait(timeout=30)
+    return _capacity_row(s, 30, 22 * tile, streams, wall, cpu)
 
 
 EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
@@ -491,13 +563,19 @@ def report(doc) -> str:
     c = doc.get("capacity")
     if c:
         lines += [f"## Latency and capacity ({c['seconds']:g} s each, real time, window 30 s)", "",
-                  "| frames/s | units | frame period [ms] | processing per frame median / 99 % [ms] | busy "
-                  "fraction | delay median / 99 % / max [s] | keeps up |", "|---|---|---|---|---|---|---|"]
+                  "| frames/s | units | streams | frame period [ms] | processing per frame median / 99 % [ms] | "
+                  "CPU per frame median / 99 % [ms] | busy fraction | delay median / 99 % / max [s] | "
+                  "area estimate delay median / 99 % [s] | peak memory [MiB] | keeps up |",
+                  "|---|---|---|---|---|---|---|---|---|---|---|"]
         for r in c["rows"]:
             p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
-            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r['frame_period_ms']:.1f} | "
-                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(r['busy_fraction'], '.2f')} | "
-                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | {r['keeps_up']} |")
+            cpu, e = r.get("processing_cpu_ms_per_frame") or {}, r.get("inertia_delay_s") or {}
+            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r['frame_period_ms']:.1f} | "
+                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(cpu.get('median'))} / {_f(cpu.get('p99'))} | "
+                         f"{_f(r['busy_fraction'], '.2f')} | "
+                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | "
+                         f"{_f(e.get('median'))} / {_f(e.get('p99'))} | {_f(r.get('peak_rss_mib'), '.0f')} | "
+                         f"{r['keeps_up']} |")
         lines.append("")
     return "\n".join(lines)
 

@@ -346,3 +346,28 @@ def test_stream_layer_imports_no_app_and_readers_not_each_other():
                     assert mod not in (".monitor",) and not (mod == "." and "monitor" in names), mod
     text = (root / "experiments" / "monitor" / "run.py").read_text()
     assert "jaxdse._" not in text
+
+
+def test_recording_rows_written_by_a_process_are_the_same_bytes(tmp_path):
+    """A wide recording is formatted by a writer process (CsvRows): the same file, byte for byte,
+    as written in the monitor's own process, and it reads back to the same float64 (NaN kept)."""
+    from jaxdse._stream.monitor import CsvRows
+
+    rng = np.random.default_rng(3)
+    blocks = [rng.normal(size=(k, 7)) * 10.0 ** rng.integers(-8, 8, size=(k, 7)) for k in (3, 1, 5)]
+    blocks[1][0, 2] = np.nan
+    header = [f"c{j}" for j in range(7)]
+    paths = []
+    for in_process in (True, False):
+        path = tmp_path / f"rows_{in_process}.csv"
+        w = CsvRows(path, header, in_process=in_process)
+        assert (w.proc is None) == in_process
+        for b in blocks:
+            w.write(b)
+        w.close()
+        paths.append(path)
+    assert paths[0].read_bytes() == paths[1].read_bytes()
+    back = np.genfromtxt(paths[1], delimiter=",", skip_header=1)
+    np.testing.assert_array_equal(back, np.concatenate(blocks))
+    with pytest.raises(ValueError, match="header has 7"):
+        CsvRows(tmp_path / "bad.csv", header, in_process=True).write(np.zeros((1, 6)))
