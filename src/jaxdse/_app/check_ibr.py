@@ -38,10 +38,12 @@ from .._dyr.records import PSSE_IBR_MODELS, ibr_model
 from .._dyr.stiff import modes
 from .._dyr.unit import UnitInputs
 from .._io.psse import DyrData, RawCase, RawGenerator, record_label
-from .._models.ibr import IBR_MODELS
+from .._models.ibr import IBR_MODELS, IBR_ROLES
 
 IBR_KINDS = ("converter", "electrical", "plant")
-"""The roles of a plant's records, in the order of the reports."""
+"""The roles of a plant's records in the columns of the reports."""
+WIND_KINDS = ("torque", "pitch", "aero", "drive")
+"""The roles of a type-3 wind turbine's mechanics records (after :data:`IBR_KINDS` in a chain)."""
 F_STEP_HZ = 0.1
 """The frequency step of the third run [Hz]."""
 
@@ -64,10 +66,10 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator) -> IbrStatic:
     records: dict = {}
     unsupported = []
     for r in recs:
-        role = PSSE_IBR_MODELS.get(r.model)
+        role = IBR_ROLES.get(r.model, PSSE_IBR_MODELS.get(r.model))
         if role is None and not is_converter(r.model):
             continue
-        if role in IBR_KINDS and role not in records:
+        if role in IBR_KINDS + WIND_KINDS and role not in records:
             records[role], models[role] = r, r.model
         if r.model not in IBR_MODELS:
             what = {"wind": "type-3 wind turbine model", None: "converter model"}.get(role, f"{role} model")
@@ -217,9 +219,9 @@ def at(r: IbrResult, j: int) -> dict:
 
 def _state_name(unit: IbrUnit, models: dict, k: int) -> str:
     start = 0
-    for kind, n in zip(IBR_KINDS, unit.sizes):
+    for kind, n in zip(unit.PARTS, unit.sizes):
         if k < start + n:
-            return f"{models[kind]} state {k - start + 1} of {n}"
+            return f"{models.get(kind)} state {k - start + 1} of {n}"
         start += n
     return f"state {k}"
 
@@ -303,5 +305,5 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
     return "pass", [], numbers, notes
 
 
-__all__ = ["F_STEP_HZ", "IBR_KINDS", "IbrLane", "IbrResult", "IbrStatic", "at", "batch_jit", "ibr_static",
+__all__ = ["F_STEP_HZ", "IBR_KINDS", "WIND_KINDS", "IbrLane", "IbrResult", "IbrStatic", "at", "batch_jit", "ibr_static",
            "judge", "lanes"]

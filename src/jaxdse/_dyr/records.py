@@ -87,7 +87,7 @@ class IbrModel:
     @property
     def structure(self) -> tuple[str, ...]:
         """The model names in a fixed order: plants of one structure share one compiled call."""
-        return tuple(self.models.get(k, "-") for k in ("converter", "electrical", "plant"))
+        return tuple(self.models.get(k, "-") for k in IbrUnit.PARTS)
 
 
 def is_ibr(dyr: DyrData, bus: int, machine_id: str) -> bool:
@@ -103,7 +103,7 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
     out = IbrModel(unit=None)
     parts: dict[str, object] = {}
     for rec in dyr.unit_records(bus, machine_id):
-        role = PSSE_IBR_MODELS.get(rec.model)
+        role = IBR_ROLES.get(rec.model, PSSE_IBR_MODELS.get(rec.model))
         if role is None:
             out.notes.append(f"{record_label(rec)}: not an inverter-based resource model; left out")
             continue
@@ -128,7 +128,16 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
     if not out.missing:
         out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
-                           plant=parts.get("plant"))
+                           plant=parts.get("plant"), torque=parts.get("torque"),
+                           pitch=parts.get("pitch"), aero=parts.get("aero"), drive=parts.get("drive"))
+        wind = [k for k in ("torque", "pitch", "aero") if k in parts]
+        if wind and "drive" not in parts:
+            out.notes.append("no drive train record (WTDTA1): the rotor speed is held at its initial value "
+                             + ("(WTTQA1's speed table at the initial power)" if "torque" in parts else "(1 pu)")
+                             + "; " + ("WTPTA1 and WTARA1 then do not act on the electrical output"
+                                       if "pitch" in parts or "aero" in parts else "the speed loop is open"))
+        if "pitch" in parts and "aero" not in parts:
+            out.notes.append("WTPTA1 without WTARA1: the pitch acts on no aerodynamic model")
         plant = parts.get("plant")
         if plant is not None and (int(plant.regulated_bus) not in (0, bus) or int(plant.branch[0]) != 0):
             out.notes.append(f"REPCA1: regulated bus {int(plant.regulated_bus)} and branch "
