@@ -20,7 +20,7 @@ from .._io.psse import (
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
-from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, vdl_trailing_zeros
+from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, record_readings, vdl_trailing_zeros
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .ibr_unit import IbrUnit
@@ -120,6 +120,7 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
             continue
         try:
             parts[role] = ibr_from_dyr(rec.model, rec.constants)
+            out.notes.extend(record_readings(rec.model, rec.constants))
         except ValueError as err:
             out.missing.append(f"{record_label(rec)}: {str(err).splitlines()[0]}")
     for role in ("converter", "electrical"):

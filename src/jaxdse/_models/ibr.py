@@ -47,6 +47,17 @@ LVPL_OPEN_PU = 9999.0
 LVPL_RESET_S = 1e-3
 """REGCA1: an Ip state above a falling LVPL is brought to it with this time constant [s] (PSS/E
 resets the state of a non-windup limit to the limit; an ODE relaxes it, fast against Tg)."""
+TG_BYPASS_S = 0.01
+"""REGCA1 with Tg = 0: the converter lag read as bypassed (a zero time constant is a
+pass-through in PSS/E, and PowerWorld sets a time constant below its minimum to 0, e.g. WTGTRQ_A:
+"If 0.0 < Tp < 0.125*Mult*TimeStep then Tp = 0.0", WebHelp "Pref Controller Model: WTGTRQ_A").
+A pass-through here would close an algebraic loop (Ip -> Pe -> REECA1 -> Ipcmd -> Ip), so the lag is
+kept at this time constant [s], fast against every control loop of the plant (a unit note says so)."""
+IQR_ZERO_IS_OPEN = True
+"""REGCA1 Iqrmax = 0 (or Iqrmin = 0) is read as *no* rate limit on Iq, not as Iq frozen: the
+convention of PowerWorld's renewable models that a zero limit is ignored (WebHelp "Machine Model:
+REGFM_A1": "Imax ... Zero means ignore Imax"). Read literally, a zero rate freezes Iq at its
+start and the plant's reactive control does nothing; a unit note says how the value was read."""
 V_FLOOR_PU = 0.01
 """Dividers by a filtered voltage use max(V, this) [pu] (as the WECC diagrams do)."""
 
@@ -85,7 +96,8 @@ class REGCA1(eqx.Module):
     lvplsw: int = eqx.field(static=True, converter=int, default=1)
     """Lvplsw (ICON): 1 the LVPL limit on Ip is active, 0 not."""
     t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
-    """Tg: converter time constant [s] (> 0)."""
+    """Tg: converter time constant [s] (>= 0; 0: the converter's own lag bypassed, realised as
+    :data:`TG_BYPASS_S`)."""
     rrpwr_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
     """Rrpwr: up ramp rate of the active current [pu/s] (> 0)."""
     brkpt_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
@@ -107,20 +119,20 @@ class REGCA1(eqx.Module):
     khv: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
     """Khv: HVRCM gain [pu current / pu voltage]."""
     iqrmax_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
-    """Iqrmax: up rate of the reactive current [pu/s] (> 0)."""
+    """Iqrmax: up rate of the reactive current [pu/s] (>= 0; 0: no limit)."""
     iqrmin_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
-    """Iqrmin: down rate of the reactive current [pu/s] (< 0)."""
+    """Iqrmin: down rate of the reactive current [pu/s] (<= 0; 0: no limit)."""
     accel: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
     """Accel: PSS/E network acceleration factor [-] (unused here)."""
 
     n_states = 3
 
     def __check_init__(self):
-        check_positive(self, "t_g_s", "rrpwr_pu_s", "iqrmax_pu_s")
-        check_nonnegative(self, "t_fltr_s", "khv")
+        check_positive(self, "rrpwr_pu_s")
+        check_nonnegative(self, "t_g_s", "t_fltr_s", "khv", "iqrmax_pu_s")
         if all_concrete(self.iqrmin_pu_s, self.zerox_pu, self.brkpt_pu, self.lvpnt0_pu,
                         self.lvpnt1_pu, self.iolim_pu):
-            check_that(self, self.iqrmin_pu_s < 0, f"Iqrmin must be < 0, got {self.iqrmin_pu_s}")
+            check_that(self, self.iqrmin_pu_s <= 0, f"Iqrmin must be <= 0, got {self.iqrmin_pu_s}")
             check_that(self, self.iolim_pu <= 0, f"Iolim must be <= 0, got {self.iolim_pu}")
             check_that(self, self.lvpnt1_pu > self.lvpnt0_pu,
                        f"Lvpnt1 ({self.lvpnt1_pu}) must be > Lvpnt0 ({self.lvpnt0_pu})")
@@ -153,9 +165,13 @@ class REGCA1(eqx.Module):
         ceiling = self.lvpl(vf)
         # the lag with its up rate, and the ceiling as a fast pull (continuous in Ip: no chattering
         # of a solver's steps between "blocked" and "reset" at the limit)
-        d_ip = jnp.minimum(jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s),
+        t_g = jnp.where(self.t_g_s > 0, self.t_g_s, TG_BYPASS_S)
+        d_ip = jnp.minimum(jnp.minimum((ipcmd - ip) / t_g, self.rrpwr_pu_s),
                            (ceiling - ip) / LVPL_RESET_S)
-        d_iq = jnp.clip((iqcmd - iq) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
+        # a rate limit of 0 is no limit (see IQR_ZERO_IS_OPEN)
+        up = jnp.where(self.iqrmax_pu_s > 0, self.iqrmax_pu_s, jnp.inf)
+        down = jnp.where(self.iqrmin_pu_s < 0, self.iqrmin_pu_s, -jnp.inf)
+        d_iq = jnp.clip((iqcmd - iq) / t_g, down, up)
         _, d_vf = _lag(vt, vf, self.t_fltr_s)
         return jnp.stack([d_ip, d_iq, d_vf])
 
@@ -972,6 +988,46 @@ def vdl_trailing_zeros(constants: Sequence) -> list[str]:
     return out
 
 
+_DEADBANDS = {"REECA1": (("dbd1", "dbd2"),), "REPCA1": (("dbd1", "dbd2"), ("fdbd1", "fdbd2"))}
+
+
+def _read(name: str, values: dict) -> list[str]:
+    """How values that the models' own checks would refuse are read (``values`` changed in
+    place), one note each. A deadband edge of the wrong sign (REPCA1 dbd1 = 0.03 with dbd2 = 0,
+    as Texas 7k writes it) is read as its magnitude on the side it names: taken literally the
+    error is -0.03 at rest and no initial state holds. PowerWorld corrects limits entered with
+    the wrong sign in the same way (WebHelp "Stabilizer Model: WTGPT_A and WTPTA1": "If
+    RThetaMin > 0 then change sign to negative")."""
+    notes = []
+    for lo, hi in _DEADBANDS.get(name, ()):
+        for con, wrong, fix in ((lo, values.get(lo, 0.0) > 0, -values.get(lo, 0.0)),
+                                (hi, values.get(hi, 0.0) < 0, -values.get(hi, 0.0))):
+            if wrong:
+                notes.append(f"{name}: {con} = {values[con]:g} read as {fix:g} (a deadband edge of the "
+                             f"wrong sign: {lo} <= 0 <= {hi})")
+                values[con] = fix
+    if name == "REGCA1":
+        if values.get("Tg") == 0:
+            notes.append(f"REGCA1: Tg = 0 read as the converter lag bypassed (kept as a {TG_BYPASS_S:g} s lag: "
+                         "a pass-through would close an algebraic loop)")
+        for con in ("Iqrmax", "Iqrmin"):
+            if values.get(con) == 0:
+                notes.append(f"REGCA1: {con} = 0 read as no rate limit on Iq (read literally, Iq could not move)")
+    return notes
+
+
+def record_readings(model: str, constants: Sequence) -> list[str]:
+    """The notes of :func:`ibr_from_dyr`'s readings of a record (empty when it reads as written
+    or does not read at all)."""
+    name = str(model).strip().upper()
+    names = IBR_FIELDS.get(name, ())
+    try:
+        values = {c: float(x) for c, x in zip(names, constants) if c != "CKT"}
+    except (TypeError, ValueError):
+        return []
+    return _read(name, values)
+
+
 def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
     """The module of an inverter-based resource's .dyr record: ``model`` (REGCA1, REECA1,
     REPCA1, WTDTA1, WTARA1, WTPTA1, WTTQA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
@@ -1000,6 +1056,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
                 raise ValueError(f"{name}: ICON {con} must be an integer, got {value!r}")
             x = int(round(x))
         values[con] = x
+    _read(name, values)
     fields = IBR_PARAMETERS[name]
     kwargs = {f: values[con] for f, con in fields.items()}
     if name == "REECA1":
@@ -1023,7 +1080,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         raise ValueError(record_message(msg, name, fields)) from None
 
 
-__all__ = ["VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+__all__ = ["IQR_ZERO_IS_OPEN", "TG_BYPASS_S", "record_readings", "VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
            "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "WTARA1", "WTDTA1", "WTPTA1", "WTTQA1", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
