@@ -246,7 +246,7 @@ def test_dyr_records_read_into_the_models(tmp_path):
 
 
 @pytest.mark.parametrize("model,k,value,message", [
-    ("REGCA1", 1, -0.02, "REGCA1: Tg must be > 0, got -0.02"),
+    ("REGCA1", 1, -0.02, "REGCA1: Tg must be >= 0, got -0.02"),
     ("REECA1", 2, 2, "REECA1: VFLAG must be 0 or 1, got 2"),
     ("REECA1", 7, 0.85, "REECA1: Vup (0.85) must be > Vdip (0.9)"),
     ("REPCA1", 23, -0.1, "REPCA1: Kig must be >= 0, got -0.1"),
