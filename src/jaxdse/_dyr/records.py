@@ -78,7 +78,8 @@ class IbrModel:
 
     unit: IbrUnit | None
     models: dict[str, str] = field(default_factory=dict)
-    """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1"} of the records used."""
+    """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1", "torque": "WTTQA1",
+    ...} of the records used."""
     missing: list[str] = field(default_factory=list)
     """Why the plant has no .dyr model (one line each); empty when ``unit`` is set."""
     notes: list[str] = field(default_factory=list)
@@ -86,8 +87,10 @@ class IbrModel:
 
     @property
     def structure(self) -> tuple[str, ...]:
-        """The model names in a fixed order: plants of one structure share one compiled call."""
-        return tuple(self.models.get(k, "-") for k in IbrUnit.PARTS)
+        """The model names in a fixed order (converter, electrical, plant, then a wind turbine's
+        mechanics present): plants of one structure share one compiled call."""
+        return (tuple(self.models.get(k, "-") for k in IbrUnit.PARTS[:3])
+                + tuple(self.models[k] for k in IbrUnit.PARTS[3:] if k in self.models))
 
 
 def is_ibr(dyr: DyrData, bus: int, machine_id: str) -> bool:
