@@ -1,4 +1,5 @@
-"""``jaxdse check`` of an inverter-based plant (REGCA1 + REECA1, optional REPCA1): its records,
+"""``jaxdse check`` of an inverter-based plant (REGCA1 + REECA1, optional REPCA1, optional type-3 wind
+mechanics WTTQA1, WTPTA1, WTARA1, WTDTA1): its records,
 its runs and its judgement, beside the synchronous units of :mod:`jaxdse._app.check`.
 
 Three runs with the terminal voltage imposed (as the playback drives a plant: the measured
