@@ -283,8 +283,9 @@ def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
     assert not any("Thld" in n for n in full.notes)
     b = ibr_model(dyr, 9, "1")
     assert b.unit is None and any("REECB1 is not simulated" in m for m in b.missing)
-    alone = ibr_model(dyr, 10, "1")
-    assert alone.unit is None and any("no electrical record (REECA1)" in m for m in alone.missing)
+    alone = ibr_model(dyr, 10, "1")     # REGCA1 alone: its commands held (PSS/E's missing controller)
+    assert alone.unit is not None and alone.unit.electrical is None
+    assert any("Ipcmd and Iqcmd held at their initial values" in n for n in alone.notes)
     assert is_ibr(dyr, 8, "1") and not is_ibr(dyr, 11, "1")
 
 

@@ -189,8 +189,8 @@ def test_texas7k_wind_records_read_into_the_models():
 @pytest.mark.parametrize("model,values,message", [
     ("WTTQA1", "1 0.5 2.5 0.07 60 1.1 0 0.2 0.58 0.4 0.72 0.72 0.866 0.86 1 50",
      "WTTQA1: TRATE = 50 MW: only TRATE = 0 (the machine base) is simulated"),
-    ("WTTQA1", "2 0.5 2.5 0.07 60 1.1 0 0.2 0.58 0.4 0.72 0.72 0.866 0.86 1 0",
-     "WTTQA1: Tflag must be 0 or 1, got 2"),
+    ("WTTQA1", "3 0.5 2.5 0.07 60 1.1 0 0.2 0.58 0.4 0.72 0.72 0.866 0.86 1 0",
+     "WTTQA1: Tflag must be 0, 1 or 2, got 3"),
     ("WTPTA1", "25 150 30 0 0 0.3 27 0 10 5", "WTPTA1: RThetamin must be < 0, got 5.0"),
     ("WTDTA1", "5 0 1.2 1.8 1.5", "WTDTA1: Htfrac must be < 1, got 1.2"),
     ("WTARA1", "0 0", "WTARA1: Ka must be > 0, got 0.0"),
@@ -209,3 +209,31 @@ def test_deadband_of_the_wrong_sign_is_read_as_its_magnitude():
     assert float(plant.dbd1_pu) == pytest.approx(-0.03) and float(plant.dbd2_pu) == 0.0
     assert record_readings("REPCA1", rec) == [
         "REPCA1: dbd1 = 0.03 read as -0.03 (a deadband edge of the wrong sign: dbd1 <= 0 <= dbd2)"]
+
+
+def test_tflag_2_and_a_table_out_of_order_start_at_rest():
+    # Texas 7k 190149 'WTTQA1' (Tflag = 2) with 150502's table (P1 = 0.504 > P2 = 0.4)
+    rec = "2 0.6 3 0.066667 30 1.2 0.08 0.504 0.58 0.4 0.74 0.76 0.869 0.905 1 0".split()
+    torque = ibr_from_dyr("WTTQA1", rec)
+    np.testing.assert_allclose(np.asarray(torque.table_p_pu), [0.4, 0.504, 0.76, 0.905])
+    np.testing.assert_allclose(np.asarray(torque.table_w_pu), [0.74, 0.58, 0.869, 1.0])
+    assert "read in order of P" in record_readings("WTTQA1", rec)[0]
+    unit = _unit()
+    unit = IbrUnit(unit.converter, unit.electrical, None, torque=torque, pitch=unit.pitch, aero=unit.aero,
+                   drive=unit.drive)
+    y0, refs = _start(unit)
+    assert float(jnp.max(jnp.abs(unit.vector_field(y0, _inputs(V0), refs)))) < 1e-12
+    # Tflag = 2: the torque ceiling is Pref0/wg, so more power asked by the plant raises it
+    s = unit.signals(y0, _inputs(V0), refs)
+    assert abs(float(s.p_ref_pu) - P0) < 1e-12
+
+
+def test_converter_without_electrical_controls_holds_its_commands():
+    unit = IbrUnit(REGCA1(t_g_s=0.02, lvplsw=0), None)
+    y0, refs = _start(unit)
+    assert unit.sizes == (3, 0, 0, 0, 0, 0, 0)
+    assert float(jnp.max(jnp.abs(unit.vector_field(y0, _inputs(V0), refs)))) < 1e-12
+    # the currents stay put when |V| steps: P and Q scale with |V|
+    s = unit.signals(y0, _inputs(1.02 * V0), refs)
+    assert abs(float(s.p_pu) - 1.02 * P0) < 1e-12 and abs(float(s.q_pu) - 1.02 * Q0) < 1e-12
+    assert float(jnp.max(jnp.abs(unit.vector_field(y0, _inputs(1.02 * V0), refs)[:2]))) < 1e-12

@@ -111,10 +111,11 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float) -> list
                         f"({where}): the record's own limit does not let the plant hold its power flow"))
 
     e = unit.electrical
-    cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
-    cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
-    cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
-    if e.qflag or not e.vflag:
+    if e is not None:
+        cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
+        cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
+        cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
+    if e is not None and (e.qflag or not e.vflag):
         cross("electrical", "QMAX", q0, float(e.q_max_pu), "above", "Q0")
         cross("electrical", "QMIN", q0, float(e.q_min_pu), "below", "Q0")
     if unit.plant is not None:
@@ -261,7 +262,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
                      f"(limit {spec.max_pq_error:g})")
     if fails:
         return "fail", fails, numbers, []
-    open_loop = bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
+    open_loop = unit.electrical is not None and bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
     notes = [OPEN_LOOP_NOTE] if open_loop else []
     t = np.arange(len(held["p"])) / spec.frame_hz
     after = t > spec.step_at_s

@@ -64,6 +64,11 @@ class IbrReferences(NamedTuple):
     q_ext_pu: Array
     """Qext of the electrical controls [pu] (held without a plant controller)."""
     electrical: ElectricalReferences
+    """The electrical controls' references (zeros without them)."""
+    ipcmd_pu: Array
+    """Ipcmd at the start [pu] (held without electrical controls)."""
+    iqcmd_pu: Array
+    """Iqcmd at the start [pu] (held without electrical controls)."""
     plant: PlantReferences
     """The plant controller's references (zeros without one)."""
     wind: WindReferences
@@ -101,7 +106,9 @@ class IbrUnit(eqx.Module):
     """One inverter-based plant as its PSS/E records describe it (machine base)."""
 
     converter: REGCA1
-    electrical: REECA1
+    electrical: REECA1 | None
+    """None: no electrical control record; Ipcmd and Iqcmd held at their initial values (PSS/E
+    holds the output of a controller the case does not model, as an Efd without exciter)."""
     plant: REPCA1 | None = None
     torque: WTTQA1 | None = None
     pitch: WTPTA1 | None = None
@@ -162,7 +169,10 @@ class IbrUnit(eqx.Module):
         if self.torque is not None:
             p_ref, w_ref = self.torque.outputs(ys["torque"], p, wg, p_plant)
         e_in = ElectricalInputs(vt, p, q, p_ref, q_ext, wg + 0.0 * vt)
-        ipcmd, iqcmd, dip, _ = self.electrical.commands(ys["electrical"], e_in, refs.electrical)
+        if self.electrical is None:
+            ipcmd, iqcmd, dip = refs.ipcmd_pu + 0.0 * vt, refs.iqcmd_pu + 0.0 * vt, vt < 0.0
+        else:
+            ipcmd, iqcmd, dip, _ = self.electrical.commands(ys["electrical"], e_in, refs.electrical)
         theta = refs.wind.theta0_deg
         if self.pitch is not None:
             theta = self.pitch.pitch(ys["pitch"])
@@ -185,15 +195,17 @@ class IbrUnit(eqx.Module):
         """d(state)/dt."""
         s, ys, e_in, w = self._flow(y, u, refs)
         vt = e_in.vt_pu
-        parts = [self.converter.vector_field(ys["converter"], vt, s.ipcmd_pu, s.iqcmd_pu),
-                 self.electrical.vector_field(ys["electrical"], e_in, refs.electrical)]
+        parts = [self.converter.vector_field(ys["converter"], vt, s.ipcmd_pu, s.iqcmd_pu)]
+        if self.electrical is not None:
+            parts.append(self.electrical.vector_field(ys["electrical"], e_in, refs.electrical))
         if self.plant is not None:
             parts.append(self.plant.vector_field(
                 ys["plant"], self._plant_inputs(u, s.i_re_pu, s.i_im_pu, s.p_pu, s.q_pu), refs.plant))
         if self.torque is not None:
             parts.append(self.torque.vector_field(ys["torque"], s.p_pu, w["wg"], w["p_plant"], s.dip))
         if self.pitch is not None:
-            p_ord = self.electrical.power_order(ys["electrical"], e_in)
+            p_ord = (refs.wind.p_ord_pu if self.electrical is None
+                     else self.electrical.power_order(ys["electrical"], e_in))
             parts.append(self.pitch.vector_field(ys["pitch"], w["wt"], w["w_ref"], p_ord,
                                                  refs.wind.p_ord_pu))
         if self.drive is not None:
@@ -208,7 +220,12 @@ class IbrUnit(eqx.Module):
         p = u.v_re_pu * i_re + u.v_im_pu * i_im
         q = u.v_im_pu * i_re - u.v_re_pu * i_im
         y_c, ipcmd, iqcmd = self.converter.initial_state(vt, p, q)
-        y_e, e_refs, p_ref, q_ext = self.electrical.initial_state(vt, p, q, ipcmd, iqcmd)
+        if self.electrical is None:
+            zero = jnp.zeros_like(vt)
+            y_e, e_refs = zero[None][:0], ElectricalReferences(zero, zero, zero)
+            p_ref, q_ext = ipcmd * vt, q + 0.0 * vt
+        else:
+            y_e, e_refs, p_ref, q_ext = self.electrical.initial_state(vt, p, q, ipcmd, iqcmd)
         p_ord0 = p_ref                            # REECA1's Pord at the start (speed w0 included)
         one = jnp.ones_like(vt)
         w0 = one
@@ -216,9 +233,9 @@ class IbrUnit(eqx.Module):
         if self.torque is not None:
             # PFLAG = 1: REECA1 multiplies Pref by wg, so the torque controller sends Pord0/w0
             w0 = self.torque.speed_table(p) + 0.0 * vt
-            p_ref = p_ref / w0 if self.electrical.pflag else p_ref
+            p_ref = p_ref / w0 if self._pflag else p_ref
             y_t, _ = self.torque.initial_state(p, p_ref)
-        elif self.electrical.pflag:
+        elif self._pflag:
             p_ref = p_ref / w0
         theta0 = jnp.zeros_like(vt) if self.aero is None else self.aero.theta0_deg + 0.0 * vt
         parts = [y_c, y_e]
@@ -238,7 +255,12 @@ class IbrUnit(eqx.Module):
         if self.drive is not None:
             parts.append(self.drive.initial_state(w0, p))
         wind = WindReferences(w0, p + 0.0 * vt, p_ord0 + 0.0 * vt, theta0)
-        return jnp.concatenate(parts), IbrReferences(p_plant, q_ext, e_refs, p_refs, wind)
+        return jnp.concatenate(parts), IbrReferences(p_plant, q_ext, e_refs, ipcmd + 0.0 * vt,
+                                                     iqcmd + 0.0 * vt, p_refs, wind)
+
+    @property
+    def _pflag(self) -> bool:
+        return self.electrical is not None and bool(self.electrical.pflag)
 
 
 __all__ = ["IbrReferences", "IbrSignals", "IbrUnit", "WindReferences"]

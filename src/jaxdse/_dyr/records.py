@@ -126,12 +126,12 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
             out.notes.extend(record_readings(rec.model, rec.constants))
         except ValueError as err:
             out.missing.append(f"{record_label(rec)}: {str(err).splitlines()[0]}")
-    for role in ("converter", "electrical"):
+    for role in ("converter",):
         if role not in out.models:
             out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
     if not out.missing:
-        out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
+        out.unit = IbrUnit(converter=parts["converter"], electrical=parts.get("electrical"),
                            plant=parts.get("plant"), torque=parts.get("torque"),
                            pitch=parts.get("pitch"), aero=parts.get("aero"), drive=parts.get("drive"))
         wind = [k for k in ("torque", "pitch", "aero") if k in parts]
@@ -146,17 +146,23 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str) -> IbrModel:
         if plant is not None and (int(plant.regulated_bus) not in (0, bus) or int(plant.branch[0]) != 0):
             out.notes.append(f"REPCA1: regulated bus {int(plant.regulated_bus)} and branch "
                              f"{int(plant.branch[0])}-{int(plant.branch[1])} taken at the terminal")
-        elec = parts["electrical"]
-        if float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0:
+        elec = parts.get("electrical")
+        if elec is None:
+            out.notes.append("no electrical control record (REECA1): Ipcmd and Iqcmd held at their initial "
+                             "values (PSS/E holds the output of a controller the case does not model)"
+                             + ("; the plant controller's and the torque controller's Pref and Qext then act "
+                                "on nothing" if "plant" in parts or "torque" in parts else ""))
+        elif float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0:
             out.notes.append(f"REECA1: Thld = {float(elec.thld_s):g}, Thld2 = {float(elec.thld2_s):g}: "
                              "the post-dip hold timers are not modelled (taken as 0)")
-        if not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
+        if elec is not None and not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
             out.notes.append(f"REECA1: Vref1 = {float(elec.v_ref1_pu):g} replaced by the value that "
                              "holds the initial state")
-        if "plant" not in out.models:
+        if "plant" not in out.models and elec is not None:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
-        rec = next(r for r in dyr.unit_records(bus, machine_id) if r.model == out.models["electrical"])
-        for table in vdl_trailing_zeros(rec.constants) if rec.model == "REECA1" else []:
+        rec = next((r for r in dyr.unit_records(bus, machine_id) if r.model == out.models.get("electrical")),
+                   None)
+        for table in vdl_trailing_zeros(rec.constants) if rec is not None and rec.model == "REECA1" else []:
             out.notes.append(f"REECA1: {table}: its trailing (0, 0) points read as unused, the last "
                              "used point held beyond them")
     return out

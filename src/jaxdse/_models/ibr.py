@@ -806,8 +806,9 @@ class WTTQA1(eqx.Module):
 
         Pm  = 1/(1 + s Tp) Pe;   wref = 1/(1 + s Twref) f(Pm)     (f: the (P1, spd1)..(P4, spd4)
                                                                    table, flat outside)
-        Tflag = 1: eT = wg - wref;   Tflag = 0: eT = (Pref0 - Pm)/wg
-        Tref = PI(Kpp, Kip)[eT], limits [Temin, Temax] (non-windup, integrator frozen in a dip)
+        Tflag = 1: eT = wg - wref;   Tflag = 0 or 2: eT = (Pref0 - Pm)/wg
+        Tref = PI(Kpp, Kip)[eT], limits [Temin, Temax] (Tflag = 2: [Temin, Pref0/wg]; non-windup,
+               integrator frozen in a dip)
         Pref = Tref wg   (to REECA1)
 
     States: [Pm, wref, PI integrator]. Pref0 is the plant controller's Pref (or the held initial
@@ -815,7 +816,9 @@ class WTTQA1(eqx.Module):
     """
 
     tflag: int = eqx.field(static=True, converter=int, default=1)
-    """Tflag (ICON): 1 speed control, 0 power (torque) control."""
+    """Tflag (ICON): 1 speed control, 0 power (torque) control, 2 power control with the torque
+    ceiling Pref0/wg (PowerWorld WebHelp "WTGTRQ_A": "2=Alternative with Pref0 feeding to Temax
+    value")."""
     kpp: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
     """Kpp: PI proportional gain [pu torque / pu]."""
     kip: Float[Array, ""] = eqx.field(converter=as_float, default=0.6)
@@ -838,8 +841,8 @@ class WTTQA1(eqx.Module):
     n_states = 3
 
     def __check_init__(self):
-        if self.tflag not in (0, 1):
-            raise ValueError(f"WTTQA1.tflag must be 0 or 1, got {self.tflag}")
+        if self.tflag not in (0, 1, 2):
+            raise ValueError(f"WTTQA1.tflag must be 0, 1 or 2, got {self.tflag}")
         check_nonnegative(self, "kip", "t_p_s", "t_wref_s")
         check_positive(self, "table_w_pu")
         if all_concrete(self.te_max_pu, self.te_min_pu, self.table_p_pu, self.trate_mw):
@@ -847,6 +850,7 @@ class WTTQA1(eqx.Module):
                        f"Temax ({self.te_max_pu}) must be >= Temin ({self.te_min_pu})")
             check_that(self, np.all(np.diff(np.asarray(self.table_p_pu)) >= 0),
                        f"P1..P4 must not decrease, got {np.asarray(self.table_p_pu).tolist()}")
+            # (ibr_from_dyr reads a record's points in order of P: see _read)
             check_that(self, self.trate_mw == 0,
                        f"TRATE = {self.trate_mw:g} MW: only TRATE = 0 (the machine base) is simulated")
 
@@ -857,14 +861,17 @@ class WTTQA1(eqx.Module):
     def _internals(self, state, p_elec, wg, p_ref0):
         pm, _ = _lag(p_elec, state[0], self.t_p_s)
         w_ref, _ = _lag(self.speed_table(pm), state[1], self.t_wref_s)
-        e_t = wg - w_ref if self.tflag else (p_ref0 - pm) / jnp.maximum(wg, 0.01)
+        e_t = wg - w_ref if self.tflag == 1 else (p_ref0 - pm) / jnp.maximum(wg, 0.01)
         raw = self.kpp * e_t + state[2]
         return pm, w_ref, e_t, raw
+
+    def _ceiling(self, wg, p_ref0):
+        return p_ref0 / jnp.maximum(wg, 0.01) if self.tflag == 2 else self.te_max_pu
 
     def outputs(self, state, p_elec, wg, p_ref0):
         """(Pref to REECA1 [pu], wref [pu])."""
         _, w_ref, _, raw = self._internals(state, p_elec, wg, p_ref0)
-        return jnp.clip(raw, self.te_min_pu, self.te_max_pu) * wg, w_ref
+        return jnp.clip(raw, self.te_min_pu, self._ceiling(wg, p_ref0)) * wg, w_ref
 
     def vector_field(self, state, p_elec, wg, p_ref0, dip):
         """d(state)/dt at Pe = ``p_elec``, generator speed ``wg``, plant reference ``p_ref0``
@@ -872,7 +879,7 @@ class WTTQA1(eqx.Module):
         pm, w_ref, e_t, raw = self._internals(state, p_elec, wg, p_ref0)
         _, d_pm = _lag(p_elec, state[0], self.t_p_s)
         _, d_w = _lag(self.speed_table(pm), state[1], self.t_wref_s)
-        d_x = jnp.where(dip, 0.0, _blocked(raw, self.kip * e_t, self.te_min_pu, self.te_max_pu))
+        d_x = jnp.where(dip, 0.0, _blocked(raw, self.kip * e_t, self.te_min_pu, self._ceiling(wg, p_ref0)))
         return jnp.stack([d_pm, d_w, d_x])
 
     def initial_state(self, p0, p_ref_e):
@@ -1006,6 +1013,12 @@ def _read(name: str, values: dict) -> list[str]:
                 notes.append(f"{name}: {con} = {values[con]:g} read as {fix:g} (a deadband edge of the "
                              f"wrong sign: {lo} <= 0 <= {hi})")
                 values[con] = fix
+    if name == "WTTQA1" and all(c in values for c in _WT_TABLE):
+        ps = [values[c] for c in _WT_TABLE[0::2]]
+        if any(b < a for a, b in zip(ps, ps[1:])):
+            notes.append(f"WTTQA1: the speed table's powers P1..P4 = {', '.join(f'{p:g}' for p in ps)} do not "
+                         "increase: its (P, speed) points read in order of P (a table is a function of P; "
+                         "taken as written it has none)")
     if name == "REGCA1":
         if values.get("Tg") == 0:
             notes.append(f"REGCA1: Tg = 0 read as the converter lag bypassed (kept as a {TG_BYPASS_S:g} s lag: "
@@ -1065,8 +1078,9 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         v2, i2 = vdl_points(tail[8:16:2], tail[9:16:2])
         kwargs.update(vdl1_v_pu=v1, vdl1_i_pu=i1, vdl2_v_pu=v2, vdl2_i_pu=i2)
     if name == "WTTQA1":
-        kwargs.update(table_p_pu=[values[c] for c in _WT_TABLE[0::2]],
-                      table_w_pu=[values[c] for c in _WT_TABLE[1::2]])
+        points = sorted(zip([values[c] for c in _WT_TABLE[0::2]], [values[c] for c in _WT_TABLE[1::2]]),
+                        key=lambda pw: pw[0])      # in order of P (see _read)
+        kwargs.update(table_p_pu=[p for p, _ in points], table_w_pu=[w for _, w in points])
     if name == "REPCA1":
         kwargs["branch"] = (int(values["FROM"]), int(values["TO"]))
     try:
