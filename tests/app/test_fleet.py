@@ -112,8 +112,8 @@ def test_fleet_json_and_report(ieee14):
 
 
 def test_fleet_writes_the_system_inertia(ieee14):
-    """[inertia]: every plant online and measured where its H is identified (or weakly), the
-    rest at the .dyr H; E = sum of the terms, and the truth (sum H_true S = 2550 MW s, the
+    """[inertia]: every plant online and measured where its H is identified (a weakly identified
+    one is not: its model H), the rest at the .dyr H; E = sum of the terms, and the truth (sum H_true S = 2550 MW s, the
     simulated H are the .dyr's) within E's interval."""
     _, out, doc = ieee14
     inertia = doc["inertia"]
@@ -121,8 +121,11 @@ def test_fleet_writes_the_system_inertia(ieee14):
     *areas, system = inertia["areas"]
     assert [a["area"] for a in areas] == ["area 1", "area 2"] and system["area"] == "system"
     used = {u["name"]: u for u in doc["units"]}
-    measured = [n for n, u in used.items() if u["verdict"] in ("identified", "weakly identified")]
+    measured = [n for n, u in used.items() if u["verdict"] == "identified"]
     assert system["units_online"] == 5 and system["units_measured"] == len(measured)
+    weak = {n for n, u in used.items() if u["verdict"] == "weakly identified"}
+    by_name = {u["name"]: u for u in inertia["units"]}
+    assert weak <= set(by_name) and all(by_name[n]["source"] == "model (no estimate)" for n in weak)
     e = sum(used[n]["H_s"] * 100.0 for n in measured) + sum(
         u["e_MWs"] for u in inertia["units"] if u["source"] != "measured")
     assert system["E_MWs"] == pytest.approx(e) and system["E_commitment_MWs"] == pytest.approx(2550.0)

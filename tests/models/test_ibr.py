@@ -246,7 +246,7 @@ def test_dyr_records_read_into_the_models(tmp_path):
 
 
 @pytest.mark.parametrize("model,k,value,message", [
-    ("REGCA1", 1, -0.02, "REGCA1: Tg must be > 0, got -0.02"),
+    ("REGCA1", 1, -0.02, "REGCA1: Tg must be >= 0, got -0.02"),
     ("REECA1", 2, 2, "REECA1: VFLAG must be 0 or 1, got 2"),
     ("REECA1", 7, 0.85, "REECA1: Vup (0.85) must be > Vdip (0.9)"),
     ("REPCA1", 23, -0.1, "REPCA1: Kig must be >= 0, got -0.1"),
@@ -282,10 +282,10 @@ def test_a_case_records_build_the_plant_or_say_why_not(tmp_path):
     assert any("taken at the terminal" in n for n in full.notes)
     assert not any("Thld" in n for n in full.notes)
     b = ibr_model(dyr, 9, "1")   # REECB1 (PV) is simulated: the plant builds, without a plant controller
-    assert b.missing == [] and b.structure == ("REGCA1", "REECB1", "-")
-    alone = ibr_model(dyr, 10, "1")
-    assert alone.unit is None
-    assert any("no electrical record (REECA1, REECB1, REECCU1)" in m for m in alone.missing)
+    assert b.missing == [] and b.structure[:3] == ("REGCA1", "REECB1", "-")
+    alone = ibr_model(dyr, 10, "1")     # REGCA1 alone: its commands held (PSS/E's missing controller)
+    assert alone.unit is not None and alone.unit.electrical is None
+    assert any("Ipcmd and Iqcmd held at their initial values" in n for n in alone.notes)
     assert is_ibr(dyr, 8, "1") and not is_ibr(dyr, 11, "1")
 
 

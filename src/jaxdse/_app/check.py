@@ -837,8 +837,10 @@ def wait_limit_s(units: int, spec: CheckSpec, solver: str, substeps: int) -> flo
 
 
 def _chain(e: dict) -> str:
-    kinds = check_ibr.IBR_KINDS if e.get("category") == "inverter-based" else KINDS
-    return " ".join(e["models"].get(k) or "-" for k in kinds)
+    if e.get("category") == "inverter-based":   # a wind turbine's mechanics after the three
+        wind = [e["models"][k] for k in check_ibr.WIND_KINDS if e["models"].get(k)]
+        return " ".join([e["models"].get(k) or "-" for k in check_ibr.IBR_KINDS] + wind)
+    return " ".join(e["models"].get(k) or "-" for k in KINDS)
 
 
 def _summary(entries: list[dict], off: int, programs: int) -> dict:

@@ -1,5 +1,5 @@
 """``jaxdse check`` of an inverter-based plant (REGCA1 or REGCB1 + REECA1, REECB1 or REECCU1, optional
-REPCA1): its records,
+REPCA1, optional type-3 wind mechanics WTTQA1, WTPTA1, WTARA1, WTDTA1): its records,
 its runs and its judgement, beside the synchronous units of :mod:`jaxdse._app.check`.
 
 Three runs with the terminal voltage imposed (as the playback drives a plant: the measured
@@ -42,10 +42,12 @@ from .._dyr.records import PSSE_IBR_MODELS, ibr_model
 from .._dyr.stiff import modes
 from .._dyr.unit import UnitInputs
 from .._io.psse import DyrData, RawCase, RawGenerator, record_label
-from .._models.ibr import IBR_MODELS
+from .._models.ibr import IBR_MODELS, IBR_ROLES
 
 IBR_KINDS = ("converter", "electrical", "plant")
-"""The roles of a plant's records, in the order of the reports."""
+"""The roles of a plant's records in the columns of the reports."""
+WIND_KINDS = ("torque", "pitch", "aero", "drive")
+"""The roles of a type-3 wind turbine's mechanics records (after :data:`IBR_KINDS` in a chain)."""
 F_STEP_HZ = 0.1
 """The frequency step of the third run [Hz]."""
 
@@ -69,10 +71,10 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator, horizon_s: float = 2
     records: dict = {}
     unsupported = []
     for r in recs:
-        role = PSSE_IBR_MODELS.get(r.model)
+        role = IBR_ROLES.get(r.model, PSSE_IBR_MODELS.get(r.model))
         if role is None and not is_converter(r.model):
             continue
-        if role in IBR_KINDS and role not in records:
+        if role in IBR_KINDS + WIND_KINDS and role not in records:
             records[role], models[role] = r, r.model
         if r.model not in IBR_MODELS:
             what = {"wind": "type-3 wind turbine model", None: "converter model"}.get(role, f"{role} model")
@@ -115,10 +117,10 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float, horizon
     e = unit.electrical
     if records["converter"].model == "REGCB1":
         cross("converter", "Imax", i0, float(unit.converter.i_max_pu), "above", "|I0|")
-    if records["electrical"].model != "REECA1" and e.qflag and not e.vflag:
+    if e is not None and records["electrical"].model != "REECA1" and e.qflag and not e.vflag:
         cross("electrical", "VMAX", vt, float(e.v_max_pu), "above", "VT")
         cross("electrical", "VMIN", vt, float(e.v_min_pu), "below", "VT")
-    if records["electrical"].model == "REECCU1":   # the power order limit the SOC sets at the start
+    if e is not None and records["electrical"].model == "REECCU1":   # the power order limit the SOC sets at the start
         soc, lo, hi = float(e.soc_ini_pu), float(e.soc_min_pu), float(e.soc_max_pu)
         t_soc = float(e.t_soc_s)
         for bad, con, bound, what in ((p0 > 1e-9, "SOCmin", lo, "discharging, PMAX taken to 0"),
@@ -136,10 +138,11 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float, horizon
                             f"{head} reaches {con} = {bound:.4g} after {reach:.3g} s at P0 = {p0:.4g} pu "
                             f"(T = {t_soc:g} s; {what}; {where}): the plant cannot hold its power flow "
                             f"for the {horizon_s:g} s of the check"))
-    cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
-    cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
-    cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
-    if e.qflag or not e.vflag:
+    if e is not None:
+        cross("electrical", "PMAX", p0, float(e.p_max_pu), "above", "P0")
+        cross("electrical", "PMIN", p0, float(e.p_min_pu), "below", "P0")
+        cross("electrical", "IMAX", i0, float(e.i_max_pu), "above", "|I0|")
+    if e is not None and (e.qflag or not e.vflag):
         cross("electrical", "QMAX", q0, float(e.q_max_pu), "above", "Q0")
         cross("electrical", "QMIN", q0, float(e.q_min_pu), "below", "Q0")
     if unit.plant is not None:
@@ -246,9 +249,9 @@ def at(r: IbrResult, j: int) -> dict:
 
 def _state_name(unit: IbrUnit, models: dict, k: int) -> str:
     start = 0
-    for kind, n in zip(IBR_KINDS, unit.sizes):
+    for kind, n in zip(unit.PARTS, unit.sizes):
         if k < start + n:
-            return f"{models[kind]} state {k - start + 1} of {n}"
+            return f"{models.get(kind)} state {k - start + 1} of {n}"
         start += n
     return f"state {k}"
 
@@ -288,7 +291,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
                      f"(limit {spec.max_pq_error:g})")
     if fails:
         return "fail", fails, numbers, []
-    open_loop = bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
+    open_loop = unit.electrical is not None and bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
     notes = [OPEN_LOOP_NOTE] if open_loop else []
     t = np.arange(len(held["p"])) / spec.frame_hz
     after = t > spec.step_at_s
@@ -333,5 +336,5 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
     return "pass", [], numbers, notes
 
 
-__all__ = ["F_STEP_HZ", "IBR_KINDS", "IbrLane", "IbrResult", "IbrStatic", "at", "batch_jit", "ibr_static",
+__all__ = ["F_STEP_HZ", "IBR_KINDS", "WIND_KINDS", "IbrLane", "IbrResult", "IbrStatic", "at", "batch_jit", "ibr_static",
            "judge", "lanes"]

@@ -455,15 +455,16 @@ Outcome per unit:
                   (the reasons give the numbers)
 Units of one model structure run in one compiled, vmapped call.
 
-Inverter-based plants (REGCA1 or REGCB1 + REECA1, REECB1 or REECCU1, optional REPCA1) get the
-held run, the 2 % voltage step (REECx Vref0/Vref1 and REPCA1 Vref moved with it) and a 0.1 Hz
-frequency step (the plant controller's droop); data problem where the power flow crosses
-PMAX/PMIN, QMAX/QMIN, IMAX/Imax, VMAX/VMIN (VFLAG = 0) or REECCU1's SOC limits, at the start or
-within the runs (REECCU1's state of charge integrates P and is left out of the at-rest test).
+Inverter-based plants (REGCA1 or REGCB1 + REECA1, REECB1 or REECCU1, optional REPCA1, optional
+type-3 wind mechanics WTTQA1, WTPTA1, WTARA1, WTDTA1) get the held run, the 2 % voltage step
+(REECx Vref0/Vref1 and REPCA1 Vref moved with it) and a 0.1 Hz frequency step (the plant
+controller's droop); data problem where the power flow crosses PMAX/PMIN, QMAX/QMIN, IMAX/Imax,
+VMAX/VMIN (VFLAG = 0) or REECCU1's SOC limits, at the start or within the runs (REECCU1's state
+of charge integrates P and is left out of the at-rest test).
 A step still settling at 21 s with every mode decaying is a note (its time constant), and so is
 the voltage step of QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
-network: open with the voltage imposed). Other converter models (WT4G1, type-3 wind, REECDU1,
-...) are units, not supported, named.
+network: open with the voltage imposed). Other converter models (WT4G1, PVGU1, REECDU1, ...)
+are units, not supported, named.
 
 Every generator record of the .raw is accounted for (the counts add up to the .raw's): the
 units checked (machines and inverter-based plants; an unknown machine model, e.g. a renamed GENSAL, is a unit, not supported,

@@ -24,7 +24,7 @@ from .._io.psse import (
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
-from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, vdl_trailing_zeros
+from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, record_readings, vdl_trailing_zeros
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .ibr_unit import IbrUnit
@@ -82,7 +82,8 @@ class IbrModel:
 
     unit: IbrUnit | None
     models: dict[str, str] = field(default_factory=dict)
-    """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1"} of the records used."""
+    """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1", "torque": "WTTQA1",
+    ...} of the records used."""
     missing: list[str] = field(default_factory=list)
     """Why the plant has no .dyr model (one line each); empty when ``unit`` is set."""
     notes: list[str] = field(default_factory=list)
@@ -90,8 +91,10 @@ class IbrModel:
 
     @property
     def structure(self) -> tuple[str, ...]:
-        """The model names in a fixed order: plants of one structure share one compiled call."""
-        return tuple(self.models.get(k, "-") for k in ("converter", "electrical", "plant"))
+        """The model names in a fixed order (converter, electrical, plant, then a wind turbine's
+        mechanics present): plants of one structure share one compiled call."""
+        return (tuple(self.models.get(k, "-") for k in IbrUnit.PARTS[:3])
+                + tuple(self.models[k] for k in IbrUnit.PARTS[3:] if k in self.models))
 
 
 def is_ibr(dyr: DyrData, bus: int, machine_id: str) -> bool:
@@ -108,7 +111,7 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
     out = IbrModel(unit=None)
     parts: dict[str, object] = {}
     for rec in dyr.unit_records(bus, machine_id):
-        role = PSSE_IBR_MODELS.get(rec.model)
+        role = IBR_ROLES.get(rec.model, PSSE_IBR_MODELS.get(rec.model))
         if role is None:
             out.notes.append(f"{record_label(rec)}: not an inverter-based resource model; left out")
             continue
@@ -125,9 +128,10 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
             continue
         try:
             parts[role] = ibr_from_dyr(rec.model, rec.constants)
+            out.notes.extend(record_readings(rec.model, rec.constants))
         except ValueError as err:
             out.missing.append(f"{record_label(rec)}: {str(err).splitlines()[0]}")
-    for role in ("converter", "electrical"):
+    for role in ("converter",):
         if role not in out.models:
             out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
@@ -146,30 +150,47 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
                 out.notes.append(f"REGCB1: Te = {float(conv.t_e_s):g} s with ZSORCE = 0: a current source "
                                  "(Te not used)")
     if not out.missing:
-        out.unit = IbrUnit(converter=parts["converter"], electrical=parts["electrical"],
-                           plant=parts.get("plant"))
+        out.unit = IbrUnit(converter=parts["converter"], electrical=parts.get("electrical"),
+                           plant=parts.get("plant"), torque=parts.get("torque"),
+                           pitch=parts.get("pitch"), aero=parts.get("aero"), drive=parts.get("drive"))
+        wind = [k for k in ("torque", "pitch", "aero") if k in parts]
+        if wind and "drive" not in parts:
+            out.notes.append("no drive train record (WTDTA1): the rotor speed is held at its initial value "
+                             + ("(WTTQA1's speed table at the initial power)" if "torque" in parts else "(1 pu)")
+                             + "; " + ("WTPTA1 and WTARA1 then do not act on the electrical output"
+                                       if "pitch" in parts or "aero" in parts else "the speed loop is open"))
+        if "pitch" in parts and "aero" not in parts:
+            out.notes.append("WTPTA1 without WTARA1: the pitch acts on no aerodynamic model")
         plant = parts.get("plant")
         if plant is not None and (int(plant.regulated_bus) not in (0, bus) or int(plant.branch[0]) != 0):
             out.notes.append(f"REPCA1: regulated bus {int(plant.regulated_bus)} and branch "
                              f"{int(plant.branch[0])}-{int(plant.branch[1])} taken at the terminal")
-        elec = parts["electrical"]
-        name = out.models["electrical"]
-        if name == "REECA1" and (float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0):
+        elec = parts.get("electrical")
+        name = out.models.get("electrical")
+        if elec is None:
+            out.notes.append("no electrical control record (REECA1, REECB1, REECCU1): Ipcmd and Iqcmd held "
+                             "at their initial values (PSS/E holds the output of a controller the case does "
+                             "not model)"
+                             + ("; the plant controller's and the torque controller's Pref and Qext then act "
+                                "on nothing" if "plant" in parts or "torque" in parts else ""))
+        elif name == "REECA1" and (float(elec.thld_s) != 0.0 or float(elec.thld2_s) != 0.0):
             out.notes.append(f"REECA1: Thld = {float(elec.thld_s):g}, Thld2 = {float(elec.thld2_s):g}: "
                              "the post-dip hold timers are not modelled (taken as 0)")
-        if name != "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref0_pu) != 0.0:
+        if elec is not None and name != "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref0_pu) != 0.0:
             out.notes.append(f"{name}: VFLAG = 0: its inner voltage loop holds |V| at the start (Vref0 = "
                              f"{float(elec.v_ref0_pu):g} serves the dip injection only)")
-        if name == "REECCU1":
+        if name == "REECCU1" and elec is not None:
             out.notes.append(f"REECCU1: the state of charge (SOCini = {float(elec.soc_ini_pu):g}) integrates "
                              "-Pe/T: it moves in a held run, P and Q do not")
-        if name == "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
+        if elec is not None and name == "REECA1" and not elec.vflag and elec.qflag and float(elec.v_ref1_pu) != 0.0:
             out.notes.append(f"REECA1: Vref1 = {float(elec.v_ref1_pu):g} replaced by the value that "
                              "holds the initial state")
-        if "plant" not in out.models:
+        if "plant" not in out.models and elec is not None:
             out.notes.append("no plant controller record: Pref and Qext held at their initial values")
-        rec = next(r for r in dyr.unit_records(bus, machine_id) if r.model == out.models["electrical"])
-        tables = vdl_trailing_zeros(rec.constants, rec.model) if rec.model in ("REECA1", "REECCU1") else []
+        rec = next((r for r in dyr.unit_records(bus, machine_id) if r.model == out.models.get("electrical")),
+                   None)
+        tables = (vdl_trailing_zeros(rec.constants, rec.model)
+                  if rec is not None and rec.model in ("REECA1", "REECCU1") else [])
         for table in tables:
             out.notes.append(f"{rec.model}: {table}: its trailing (0, 0) points read as unused, the last "
                              "used point held beyond them")

@@ -51,6 +51,17 @@ LVPL_OPEN_PU = 9999.0
 LVPL_RESET_S = 1e-3
 """REGCA1: an Ip state above a falling LVPL is brought to it with this time constant [s] (PSS/E
 resets the state of a non-windup limit to the limit; an ODE relaxes it, fast against Tg)."""
+TG_BYPASS_S = 0.01
+"""REGCA1 with Tg = 0: the converter lag read as bypassed (a zero time constant is a
+pass-through in PSS/E, and PowerWorld sets a time constant below its minimum to 0, e.g. WTGTRQ_A:
+"If 0.0 < Tp < 0.125*Mult*TimeStep then Tp = 0.0", WebHelp "Pref Controller Model: WTGTRQ_A").
+A pass-through here would close an algebraic loop (Ip -> Pe -> REECA1 -> Ipcmd -> Ip), so the lag is
+kept at this time constant [s], fast against every control loop of the plant (a unit note says so)."""
+IQR_ZERO_IS_OPEN = True
+"""REGCA1 Iqrmax = 0 (or Iqrmin = 0) is read as *no* rate limit on Iq, not as Iq frozen: the
+convention of PowerWorld's renewable models that a zero limit is ignored (WebHelp "Machine Model:
+REGFM_A1": "Imax ... Zero means ignore Imax"). Read literally, a zero rate freezes Iq at its
+start and the plant's reactive control does nothing; a unit note says how the value was read."""
 V_FLOOR_PU = 0.01
 """Dividers by a filtered voltage use max(V, this) [pu] (as the WECC diagrams do)."""
 
@@ -89,7 +100,8 @@ class REGCA1(eqx.Module):
     lvplsw: int = eqx.field(static=True, converter=int, default=1)
     """Lvplsw (ICON): 1 the LVPL limit on Ip is active, 0 not."""
     t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
-    """Tg: converter time constant [s] (> 0)."""
+    """Tg: converter time constant [s] (>= 0; 0: the converter's own lag bypassed, realised as
+    :data:`TG_BYPASS_S`)."""
     rrpwr_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
     """Rrpwr: up ramp rate of the active current [pu/s] (> 0)."""
     brkpt_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
@@ -111,20 +123,20 @@ class REGCA1(eqx.Module):
     khv: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
     """Khv: HVRCM gain [pu current / pu voltage]."""
     iqrmax_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=999.0)
-    """Iqrmax: up rate of the reactive current [pu/s] (> 0)."""
+    """Iqrmax: up rate of the reactive current [pu/s] (>= 0; 0: no limit)."""
     iqrmin_pu_s: Float[Array, ""] = eqx.field(converter=as_float, default=-999.0)
-    """Iqrmin: down rate of the reactive current [pu/s] (< 0)."""
+    """Iqrmin: down rate of the reactive current [pu/s] (<= 0; 0: no limit)."""
     accel: Float[Array, ""] = eqx.field(converter=as_float, default=0.7)
     """Accel: PSS/E network acceleration factor [-] (unused here)."""
 
     n_states = 3
 
     def __check_init__(self):
-        check_positive(self, "t_g_s", "rrpwr_pu_s", "iqrmax_pu_s")
-        check_nonnegative(self, "t_fltr_s", "khv")
+        check_positive(self, "rrpwr_pu_s")
+        check_nonnegative(self, "t_g_s", "t_fltr_s", "khv", "iqrmax_pu_s")
         if all_concrete(self.iqrmin_pu_s, self.zerox_pu, self.brkpt_pu, self.lvpnt0_pu,
                         self.lvpnt1_pu, self.iolim_pu):
-            check_that(self, self.iqrmin_pu_s < 0, f"Iqrmin must be < 0, got {self.iqrmin_pu_s}")
+            check_that(self, self.iqrmin_pu_s <= 0, f"Iqrmin must be <= 0, got {self.iqrmin_pu_s}")
             check_that(self, self.iolim_pu <= 0, f"Iolim must be <= 0, got {self.iolim_pu}")
             check_that(self, self.lvpnt1_pu > self.lvpnt0_pu,
                        f"Lvpnt1 ({self.lvpnt1_pu}) must be > Lvpnt0 ({self.lvpnt0_pu})")
@@ -157,9 +169,13 @@ class REGCA1(eqx.Module):
         ceiling = self.lvpl(vf)
         # the lag with its up rate, and the ceiling as a fast pull (continuous in Ip: no chattering
         # of a solver's steps between "blocked" and "reset" at the limit)
-        d_ip = jnp.minimum(jnp.minimum((ipcmd - ip) / self.t_g_s, self.rrpwr_pu_s),
+        t_g = jnp.where(self.t_g_s > 0, self.t_g_s, TG_BYPASS_S)
+        d_ip = jnp.minimum(jnp.minimum((ipcmd - ip) / t_g, self.rrpwr_pu_s),
                            (ceiling - ip) / LVPL_RESET_S)
-        d_iq = jnp.clip((iqcmd - iq) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
+        # a rate limit of 0 is no limit (see IQR_ZERO_IS_OPEN)
+        up = jnp.where(self.iqrmax_pu_s > 0, self.iqrmax_pu_s, jnp.inf)
+        down = jnp.where(self.iqrmin_pu_s < 0, self.iqrmin_pu_s, -jnp.inf)
+        d_iq = jnp.clip((iqcmd - iq) / t_g, down, up)
         _, d_vf = _lag(vt, vf, self.t_fltr_s)
         return jnp.stack([d_ip, d_iq, d_vf])
 
@@ -549,6 +565,10 @@ class REECA1(_ElectricalControls):
     def _v_alt(self, q_c, refs: ElectricalReferences):
         return q_c + refs.v_ref1_pu
 
+    def power_order(self, state, u: ElectricalInputs):
+        """Pord [pu]: the power order after its limits (the input itself when Tpord = 0)."""
+        return jnp.clip(jnp.where(self.t_pord_s > 0, state[5], self._p_in(u)), self.p_min_pu, self.p_max_pu)
+
     def _p_in(self, u: ElectricalInputs):
         return u.p_ref_pu * u.speed_pu if self.pflag else u.p_ref_pu
 
@@ -933,6 +953,275 @@ class REPCA1(eqx.Module):
         return state, PlantReferences(vc, q, u.p_pu + 0.0 * vc)
 
 
+# --- type-3 wind mechanics: WTDTA1, WTARA1, WTPTA1, WTTQA1 ----------------------------------
+#
+# Sources: WECC REMTF, *WECC Type 3 Wind Turbine Generator Model - Phase II* (2014): WTGT_A
+# (two-mass drive train), WTGAR_A (aerodynamics), WTGPT_A (pitch), WTGTRQ_A (torque); Siemens
+# PTI, *PSS(R)E Model Library* (WTDTA1, WTARA1, WTPTA1, WTTQA1: CON/ICON order); PowerWorld
+# WebHelp "WTGPT_A and WTPTA1", "WTGAR_A and WTARA1", "WTGTRQ_A and WTTQA1" (parameter lists);
+# the GridKit wind notes (ORNL, BSD-3), read for the block order only. Departures of ANDES that
+# are *not* followed: the torque PI acts on (wg - wref) (more torque when the rotor runs fast);
+# the pitch controller's speed reference is the torque controller's, after it is set; Freq1 is
+# in Hz.
+
+class WTDTA1(eqx.Module):
+    """PSS/E WTDTA1 (WECC WTGT_A), the two-mass drive train of a type-3 wind turbine.
+
+        Ht = Htfrac H,  Hg = H - Ht,  Kshaft = 2 Ht Hg (2 pi Freq1)^2 / (H wb)
+        2 Ht dwt/dt = Pm/wt - Ts - Dshaft (wt - wg)
+        2 Hg dwg/dt = Ts + Dshaft (wt - wg) - Pe/wg - DAMP (wg - w0)
+        dths/dt = wb (wt - wg),  Ts = Kshaft ths                 (wb = 2 pi 60 rad/s)
+
+    States: [wt, wg, ths] (speeds in pu, shaft twist in rad). Htfrac = 0 (or Freq1 = 0): one
+    mass of inertia H, wt = wg (the twist kept at zero derivative). DAMP acts on the generator's
+    deviation from its initial speed w0 (a reference of the start; the speeds of a type-3 turbine
+    start below 1 pu, on the torque controller's speed table).
+    """
+
+    h_s: Float[Array, ""] = eqx.field(converter=as_float, default=4.95)
+    """H: total inertia [s] (> 0)."""
+    damp: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """DAMP: damping [pu torque / pu speed] (>= 0)."""
+    htfrac: Float[Array, ""] = eqx.field(converter=as_float, default=0.92)
+    """Htfrac: turbine share of the inertia, Ht/H [-] (0 <= Htfrac < 1; 0: one mass)."""
+    freq1_hz: Float[Array, ""] = eqx.field(converter=as_float, default=1.8)
+    """Freq1: first shaft torsional resonance [Hz] (>= 0; 0: one mass)."""
+    dshaft: Float[Array, ""] = eqx.field(converter=as_float, default=1.5)
+    """Dshaft: shaft damping [pu torque / pu speed] (>= 0)."""
+    omega_b_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * math.pi * 60.0)
+    """Base angular frequency of the shaft twist [rad/s]."""
+
+    n_states = 3
+
+    def __check_init__(self):
+        check_positive(self, "h_s")
+        check_nonnegative(self, "damp", "htfrac", "freq1_hz", "dshaft")
+        if all_concrete(self.htfrac):
+            check_that(self, self.htfrac < 1, f"Htfrac must be < 1, got {self.htfrac}")
+
+    def _two_mass(self):
+        return (self.htfrac > 0) & (self.freq1_hz > 0)
+
+    def _k_shaft(self):
+        ht = self.htfrac * self.h_s
+        hg = self.h_s - ht
+        return 2 * ht * hg * (2 * jnp.pi * self.freq1_hz) ** 2 / (self.h_s * self.omega_b_rad_s)
+
+    def speeds(self, state):
+        """(wt, wg) [pu]."""
+        return state[0], state[1]
+
+    def vector_field(self, state, p_mech, p_elec, w0):
+        """d[wt, wg, ths]/dt with the mechanical and electrical power ``p_mech``, ``p_elec`` [pu]
+        and the initial speed ``w0`` [pu] (DAMP's reference)."""
+        wt, wg, ths = state[0], state[1], state[2]
+        tm = p_mech / jnp.maximum(wt, 0.01)
+        te = p_elec / jnp.maximum(wg, 0.01)
+        two = self._two_mass()
+        ht = jnp.where(two, self.htfrac * self.h_s, 1.0)
+        hg = jnp.where(two, self.h_s - ht, 1.0)
+        ts = self._k_shaft() * ths
+        td = self.dshaft * (wt - wg)
+        d_wt2 = (tm - ts - td) / (2 * ht)
+        d_wg2 = (ts + td - te - self.damp * (wg - w0)) / (2 * hg)
+        d_one = (tm - te - self.damp * (wg - w0)) / (2 * self.h_s)
+        d_ths = jnp.where(two, self.omega_b_rad_s * (wt - wg), 0.0)
+        return jnp.stack([jnp.where(two, d_wt2, d_one), jnp.where(two, d_wg2, d_one), d_ths])
+
+    def initial_state(self, w0, p0):
+        """The state at speed ``w0`` [pu] carrying power ``p0`` [pu] (Pm = Pe = p0)."""
+        w0 = jnp.asarray(w0, float)
+        k = jnp.where(self._two_mass(), self._k_shaft(), 1.0)
+        ths = jnp.where(self._two_mass(), (p0 / w0) / k, 0.0)
+        return jnp.stack([w0, w0 + 0.0 * ths, ths])
+
+
+class WTARA1(eqx.Module):
+    """PSS/E WTARA1 (WECC WTGAR_A), the aerodynamic model (no state):
+
+        Pm = Pm0 - Ka theta (theta - theta0)
+
+    with theta the blade pitch [deg] and Pm0 the mechanical power at the start [pu].
+    """
+
+    ka: Float[Array, ""] = eqx.field(converter=as_float, default=0.007)
+    """Ka: aerodynamic gain [pu power / deg^2] (> 0, PowerWorld: an error otherwise)."""
+    theta0_deg: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Theta0: initial pitch angle [deg] (>= 0)."""
+
+    n_states = 0
+
+    def __check_init__(self):
+        check_positive(self, "ka")
+        check_nonnegative(self, "theta0_deg")
+
+    def mechanical_power(self, theta_deg, p_m0):
+        """Pm [pu] at pitch ``theta_deg`` [deg], with Pm0 = ``p_m0`` [pu]."""
+        return p_m0 - self.ka * theta_deg * (theta_deg - self.theta0_deg)
+
+
+class WTPTA1(eqx.Module):
+    """PSS/E WTPTA1 (WECC WTGPT_A), the pitch controller:
+
+        eP  = Pord - Pord0;   ew = wt - wref + Kcc eP
+        thw = PI(Kpw, Kiw)[ew], limits [thetamin, thetamax] (non-windup)
+        thc = PI(Kpc, Kic)[eP], limits [thetamin, thetamax] (non-windup)
+        theta = 1/(1 + s Tp) (thw + thc), rate [Rthetamin, Rthetamax], limits [thetamin, thetamax]
+
+    States: [theta, PI_w integrator, PI_c integrator] (degrees). At the start eP = ew = 0: the
+    speed integrator holds the initial pitch (WTARA1's Theta0), the compensator's holds 0.
+    """
+
+    kiw: Float[Array, ""] = eqx.field(converter=as_float, default=25.0)
+    """Kiw: speed PI integral gain [deg / pu speed / s]."""
+    kpw: Float[Array, ""] = eqx.field(converter=as_float, default=150.0)
+    """Kpw: speed PI proportional gain [deg / pu speed]."""
+    kic: Float[Array, ""] = eqx.field(converter=as_float, default=30.0)
+    """Kic: compensator PI integral gain [deg / pu power / s]."""
+    kpc: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
+    """Kpc: compensator PI proportional gain [deg / pu power]."""
+    kcc: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Kcc: cross gain of the power error into the speed error [pu speed / pu power]."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.3)
+    """Tp: blade response time constant [s] (> 0)."""
+    theta_max_deg: Float[Array, ""] = eqx.field(converter=as_float, default=27.0)
+    """Thetamax: maximum pitch [deg]."""
+    theta_min_deg: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Thetamin: minimum pitch [deg] (<= Thetamax)."""
+    r_theta_max_deg_s: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
+    """RThetamax: pitch rate ceiling [deg/s] (> 0)."""
+    r_theta_min_deg_s: Float[Array, ""] = eqx.field(converter=as_float, default=-10.0)
+    """RThetamin: pitch rate floor [deg/s] (< 0)."""
+
+    n_states = 3
+
+    def __check_init__(self):
+        check_positive(self, "t_p_s", "r_theta_max_deg_s")
+        check_nonnegative(self, "kiw", "kic")
+        if all_concrete(self.theta_max_deg, self.theta_min_deg, self.r_theta_min_deg_s):
+            check_that(self, self.theta_max_deg >= self.theta_min_deg,
+                       f"Thetamax ({self.theta_max_deg}) must be >= Thetamin ({self.theta_min_deg})")
+            check_that(self, self.r_theta_min_deg_s < 0,
+                       f"RThetamin must be < 0, got {self.r_theta_min_deg_s}")
+
+    def _internals(self, state, wt, w_ref, p_ord, p_ord0):
+        e_p = p_ord - p_ord0
+        e_w = wt - w_ref + self.kcc * e_p
+        lo, hi = self.theta_min_deg, self.theta_max_deg
+        w_raw = self.kpw * e_w + state[1]
+        c_raw = self.kpc * e_p + state[2]
+        cmd = jnp.clip(w_raw, lo, hi) + jnp.clip(c_raw, lo, hi)
+        return e_w, e_p, w_raw, c_raw, cmd
+
+    def pitch(self, state):
+        """theta [deg]."""
+        return jnp.clip(state[0], self.theta_min_deg, self.theta_max_deg)
+
+    def vector_field(self, state, wt, w_ref, p_ord, p_ord0):
+        """d(state)/dt at turbine speed ``wt`` and reference ``w_ref`` [pu], power order
+        ``p_ord`` and its initial value ``p_ord0`` [pu]."""
+        e_w, e_p, w_raw, c_raw, cmd = self._internals(state, wt, w_ref, p_ord, p_ord0)
+        lo, hi = self.theta_min_deg, self.theta_max_deg
+        d_th = jnp.clip((cmd - state[0]) / self.t_p_s, self.r_theta_min_deg_s, self.r_theta_max_deg_s)
+        return jnp.stack([_blocked(state[0], d_th, lo, hi),
+                          _blocked(w_raw, self.kiw * e_w, lo, hi),
+                          _blocked(c_raw, self.kic * e_p, lo, hi)])
+
+    def initial_state(self, theta0_deg):
+        """The state at rest with pitch ``theta0_deg`` [deg]."""
+        th = jnp.asarray(theta0_deg, float)
+        return jnp.stack([th, th, 0.0 * th])
+
+
+class WTTQA1(eqx.Module):
+    """PSS/E WTTQA1 (WECC WTGTRQ_A), the torque controller of a type-3 wind turbine:
+
+        Pm  = 1/(1 + s Tp) Pe;   wref = 1/(1 + s Twref) f(Pm)     (f: the (P1, spd1)..(P4, spd4)
+                                                                   table, flat outside)
+        Tflag = 1: eT = wg - wref;   Tflag = 0 or 2: eT = (Pref0 - Pm)/wg
+        Tref = PI(Kpp, Kip)[eT], limits [Temin, Temax] (Tflag = 2: [Temin, Pref0/wg]; non-windup,
+               integrator frozen in a dip)
+        Pref = Tref wg   (to REECA1)
+
+    States: [Pm, wref, PI integrator]. Pref0 is the plant controller's Pref (or the held initial
+    power). TRATE (the turbine rating, 0: MBASE) must be 0.
+    """
+
+    tflag: int = eqx.field(static=True, converter=int, default=1)
+    """Tflag (ICON): 1 speed control, 0 power (torque) control, 2 power control with the torque
+    ceiling Pref0/wg (PowerWorld WebHelp "WTGTRQ_A": "2=Alternative with Pref0 feeding to Temax
+    value")."""
+    kpp: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
+    """Kpp: PI proportional gain [pu torque / pu]."""
+    kip: Float[Array, ""] = eqx.field(converter=as_float, default=0.6)
+    """Kip: PI integral gain [pu torque / pu / s] (>= 0)."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Tp: electrical power filter [s] (0: none)."""
+    t_wref_s: Float[Array, ""] = eqx.field(converter=as_float, default=60.0)
+    """Twref: speed reference filter [s] (0: none)."""
+    te_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.2)
+    """Temax: torque ceiling [pu]."""
+    te_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Temin: torque floor [pu] (<= Temax)."""
+    table_p_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.2, 0.4, 0.6, 0.8))
+    """P1..P4: powers of the speed table [pu] (non-decreasing)."""
+    table_w_pu: Float[Array, " 4"] = eqx.field(converter=as_float, default=(0.58, 0.72, 0.86, 1.2))
+    """spd1..spd4: speeds of the speed table [pu] (> 0)."""
+    trate_mw: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """TRATE: turbine rating [MW] (0: MBASE; only 0 is simulated)."""
+
+    n_states = 3
+
+    def __check_init__(self):
+        if self.tflag not in (0, 1, 2):
+            raise ValueError(f"WTTQA1.tflag must be 0, 1 or 2, got {self.tflag}")
+        check_nonnegative(self, "kip", "t_p_s", "t_wref_s")
+        check_positive(self, "table_w_pu")
+        if all_concrete(self.te_max_pu, self.te_min_pu, self.table_p_pu, self.trate_mw):
+            check_that(self, self.te_max_pu >= self.te_min_pu,
+                       f"Temax ({self.te_max_pu}) must be >= Temin ({self.te_min_pu})")
+            check_that(self, np.all(np.diff(np.asarray(self.table_p_pu)) >= 0),
+                       f"P1..P4 must not decrease, got {np.asarray(self.table_p_pu).tolist()}")
+            # (ibr_from_dyr reads a record's points in order of P: see _read)
+            check_that(self, self.trate_mw == 0,
+                       f"TRATE = {self.trate_mw:g} MW: only TRATE = 0 (the machine base) is simulated")
+
+    def speed_table(self, p):
+        """f(P) [pu speed]: the speed reference at power ``p`` [pu]."""
+        return jnp.interp(p, self.table_p_pu, self.table_w_pu)
+
+    def _internals(self, state, p_elec, wg, p_ref0):
+        pm, _ = _lag(p_elec, state[0], self.t_p_s)
+        w_ref, _ = _lag(self.speed_table(pm), state[1], self.t_wref_s)
+        e_t = wg - w_ref if self.tflag == 1 else (p_ref0 - pm) / jnp.maximum(wg, 0.01)
+        raw = self.kpp * e_t + state[2]
+        return pm, w_ref, e_t, raw
+
+    def _ceiling(self, wg, p_ref0):
+        return p_ref0 / jnp.maximum(wg, 0.01) if self.tflag == 2 else self.te_max_pu
+
+    def outputs(self, state, p_elec, wg, p_ref0):
+        """(Pref to REECA1 [pu], wref [pu])."""
+        _, w_ref, _, raw = self._internals(state, p_elec, wg, p_ref0)
+        return jnp.clip(raw, self.te_min_pu, self._ceiling(wg, p_ref0)) * wg, w_ref
+
+    def vector_field(self, state, p_elec, wg, p_ref0, dip):
+        """d(state)/dt at Pe = ``p_elec``, generator speed ``wg``, plant reference ``p_ref0``
+        [pu]; the integrator is frozen while ``dip`` (REECA1's voltage-dip flag)."""
+        pm, w_ref, e_t, raw = self._internals(state, p_elec, wg, p_ref0)
+        _, d_pm = _lag(p_elec, state[0], self.t_p_s)
+        _, d_w = _lag(self.speed_table(pm), state[1], self.t_wref_s)
+        d_x = jnp.where(dip, 0.0, _blocked(raw, self.kip * e_t, self.te_min_pu, self._ceiling(wg, p_ref0)))
+        return jnp.stack([d_pm, d_w, d_x])
+
+    def initial_state(self, p0, p_ref_e):
+        """(state, w0): the state at rest with Pe = ``p0`` and the Pref that REECA1 needs,
+        ``p_ref_e`` [pu], and the rotor speed w0 = f(p0) [pu] that it holds (eT = 0)."""
+        p0 = jnp.asarray(p0, float)
+        w0 = self.speed_table(p0)
+        return jnp.stack([p0, w0, p_ref_e / w0]), w0
+
+
 # --- PSS/E records ----------------------------------------------------------------------------
 
 # --- REGCV1 / REGCV2 (grid-forming) --------------------------------------------------------------
@@ -1151,12 +1440,18 @@ def gfm_from_andes(model: str, params: dict, fn_hz: float = 60.0) -> REGCV1:
 
 
 IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REGCB1": REGCB1, "REECA1": REECA1,
-                                            "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1}
+                                            "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1,
+                                            "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1,
+                                            "WTTQA1": WTTQA1}
 """The inverter-based resource models by their PSS/E name."""
 
 IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REGCB1": "converter", "REECA1": "electrical",
-                             "REECB1": "electrical", "REECCU1": "electrical", "REPCA1": "plant"}
-"""What each model is in a plant: the converter, its electrical controls, the plant controller."""
+                             "REECB1": "electrical", "REECCU1": "electrical", "REPCA1": "plant",
+                             "WTDTA1": "drive", "WTARA1": "aero", "WTPTA1": "pitch", "WTTQA1": "torque"}
+"""What each model is in a plant: the converter, its electrical controls, the plant controller,
+and a type-3 wind turbine's drive train, aerodynamics, pitch and torque controllers."""
+
+_WT_TABLE = ("p1", "spd1", "p2", "spd2", "p3", "spd3", "p4", "spd4")
 
 _VDL = ("Vq1", "Iq1", "Vq2", "Iq2", "Vq3", "Iq3", "Vq4", "Iq4",
         "Vp1", "Ip1", "Vp2", "Ip2", "Vp3", "Ip3", "Vp4", "Ip4")
@@ -1180,6 +1475,11 @@ IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "REGCB1": ("RateFlag", "PQFlag", "Tg", "Tfltr", "Iqrmax", "Iqrmin", "Rrpwr", "Te", "Imax"),
     "REECB1": _REECB1_FIELDS,
     "REECCU1": (*_REECB1_FIELDS, *_VDL, "T", "SOCini", "SOCmax", "SOCmin"),
+    "WTDTA1": ("H", "DAMP", "Htfrac", "Freq1", "Dshaft"),
+    "WTARA1": ("Ka", "Theta0"),
+    "WTPTA1": ("Kiw", "Kpw", "Kic", "Kpc", "Kcc", "Tp", "Thetamax", "Thetamin", "RThetamax",
+               "RThetamin"),
+    "WTTQA1": ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", *_WT_TABLE, "TRATE"),
 }
 """PSS/E names of each record's values after ``bus 'MODEL' id``, ICONs first, in PSS/E order
 (Siemens PTI, PSS/E Model Library)."""
@@ -1187,7 +1487,8 @@ IBR_FIELDS: dict[str, tuple[str, ...]] = {
 IBR_ICONS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw",), "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG"),
     "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag"),
-    "REGCB1": ("RateFlag", "PQFlag"), "REECB1": _REECB1_FIELDS[:5], "REECCU1": _REECB1_FIELDS[:5]}
+    "REGCB1": ("RateFlag", "PQFlag"), "REECB1": _REECB1_FIELDS[:5], "REECCU1": _REECB1_FIELDS[:5],
+    "WTDTA1": (), "WTARA1": (), "WTPTA1": (), "WTTQA1": ("Tflag",)}
 """The integer ICONs of each record (REPCA1's CKT is a circuit identifier, kept as text)."""
 
 _REECB1_PARAMS = ("remote_bus", "pfflag", "vflag", "qflag", "pqflag", "vdip_pu", "vup_pu", "t_rv_s",
@@ -1216,6 +1517,12 @@ IBR_PARAMETERS: dict[str, dict[str, str]] = {
     "REECB1": dict(zip(_REECB1_PARAMS, _REECB1_FIELDS)),
     "REECCU1": dict(zip((*_REECB1_PARAMS, "t_soc_s", "soc_ini_pu", "soc_max_pu", "soc_min_pu"),
                         (*_REECB1_FIELDS, "T", "SOCini", "SOCmax", "SOCmin"))),
+    "WTDTA1": dict(zip(("h_s", "damp", "htfrac", "freq1_hz", "dshaft"), IBR_FIELDS["WTDTA1"])),
+    "WTARA1": dict(zip(("ka", "theta0_deg"), IBR_FIELDS["WTARA1"])),
+    "WTPTA1": dict(zip(("kiw", "kpw", "kic", "kpc", "kcc", "t_p_s", "theta_max_deg", "theta_min_deg",
+                        "r_theta_max_deg_s", "r_theta_min_deg_s"), IBR_FIELDS["WTPTA1"])),
+    "WTTQA1": dict(zip(("tflag", "kpp", "kip", "t_p_s", "t_wref_s", "te_max_pu", "te_min_pu", "trate_mw"),
+                       ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", "TRATE"))),
 }
 """Field -> PSS/E name of each model (for the record messages and a written-back record)."""
 
@@ -1256,9 +1563,55 @@ def vdl_trailing_zeros(constants: Sequence, model: str = "REECA1") -> list[str]:
     return out
 
 
+_DEADBANDS = {"REECA1": (("dbd1", "dbd2"),), "REPCA1": (("dbd1", "dbd2"), ("fdbd1", "fdbd2"))}
+
+
+def _read(name: str, values: dict) -> list[str]:
+    """How values that the models' own checks would refuse are read (``values`` changed in
+    place), one note each. A deadband edge of the wrong sign (REPCA1 dbd1 = 0.03 with dbd2 = 0,
+    as Texas 7k writes it) is read as its magnitude on the side it names: taken literally the
+    error is -0.03 at rest and no initial state holds. PowerWorld corrects limits entered with
+    the wrong sign in the same way (WebHelp "Stabilizer Model: WTGPT_A and WTPTA1": "If
+    RThetaMin > 0 then change sign to negative")."""
+    notes = []
+    for lo, hi in _DEADBANDS.get(name, ()):
+        for con, wrong, fix in ((lo, values.get(lo, 0.0) > 0, -values.get(lo, 0.0)),
+                                (hi, values.get(hi, 0.0) < 0, -values.get(hi, 0.0))):
+            if wrong:
+                notes.append(f"{name}: {con} = {values[con]:g} read as {fix:g} (a deadband edge of the "
+                             f"wrong sign: {lo} <= 0 <= {hi})")
+                values[con] = fix
+    if name == "WTTQA1" and all(c in values for c in _WT_TABLE):
+        ps = [values[c] for c in _WT_TABLE[0::2]]
+        if any(b < a for a, b in zip(ps, ps[1:])):
+            notes.append(f"WTTQA1: the speed table's powers P1..P4 = {', '.join(f'{p:g}' for p in ps)} do not "
+                         "increase: its (P, speed) points read in order of P (a table is a function of P; "
+                         "taken as written it has none)")
+    if name == "REGCA1":
+        if values.get("Tg") == 0:
+            notes.append(f"REGCA1: Tg = 0 read as the converter lag bypassed (kept as a {TG_BYPASS_S:g} s lag: "
+                         "a pass-through would close an algebraic loop)")
+        for con in ("Iqrmax", "Iqrmin"):
+            if values.get(con) == 0:
+                notes.append(f"REGCA1: {con} = 0 read as no rate limit on Iq (read literally, Iq could not move)")
+    return notes
+
+
+def record_readings(model: str, constants: Sequence) -> list[str]:
+    """The notes of :func:`ibr_from_dyr`'s readings of a record (empty when it reads as written
+    or does not read at all)."""
+    name = str(model).strip().upper()
+    names = IBR_FIELDS.get(name, ())
+    try:
+        values = {c: float(x) for c, x in zip(names, constants) if c != "CKT"}
+    except (TypeError, ValueError):
+        return []
+    return _read(name, values)
+
+
 def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
     """The module of an inverter-based resource's .dyr record: ``model`` (REGCA1, REECA1,
-    REPCA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
+    REPCA1, WTDTA1, WTARA1, WTPTA1, WTTQA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
     (:data:`IBR_FIELDS`). Raises a one-line ValueError for an unknown model, a wrong number of
     values, a non-number, a non-integer ICON or invalid constants (named as the record names
     them)."""
@@ -1284,6 +1637,7 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
                 raise ValueError(f"{name}: ICON {con} must be an integer, got {value!r}")
             x = int(round(x))
         values[con] = x
+    _read(name, values)
     fields = IBR_PARAMETERS[name]
     kwargs = {f: values[con] for f, con in fields.items()}
     if name in ("REECA1", "REECCU1"):
@@ -1291,6 +1645,10 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         v1, i1 = vdl_points(tail[0:8:2], tail[1:8:2])
         v2, i2 = vdl_points(tail[8:16:2], tail[9:16:2])
         kwargs.update(vdl1_v_pu=v1, vdl1_i_pu=i1, vdl2_v_pu=v2, vdl2_i_pu=i2)
+    if name == "WTTQA1":
+        points = sorted(zip([values[c] for c in _WT_TABLE[0::2]], [values[c] for c in _WT_TABLE[1::2]]),
+                        key=lambda pw: pw[0])      # in order of P (see _read)
+        kwargs.update(table_p_pu=[p for p, _ in points], table_w_pu=[w for _, w in points])
     if name == "REPCA1":
         kwargs["branch"] = (int(values["FROM"]), int(values["TO"]))
     try:
@@ -1300,14 +1658,15 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         for f, con in (("vflag", "VFLAG"), ("qflag", "QFLAG"), ("pfflag", "PFFLAG"),
                        ("pflag", "PFLAG"), ("pqflag", "PQFLAG" if name != "REGCB1" else "PQFlag"),
                        ("rateflag", "RateFlag"), ("vcflag", "VCFlag"),
-                       ("refflag", "RefFlag"), ("fflag", "Fflag")):
+                       ("refflag", "RefFlag"), ("fflag", "Fflag"), ("tflag", "Tflag")):
             msg = msg.replace(f"{name}.{f} ", f"{con} ")
         raise ValueError(record_message(msg, name, fields)) from None
 
 
-__all__ = ["GfmInputs", "GfmReferences", "GfmSignals", "REECB1", "REECCU1", "REGCB1", "REGCV1", "REGCV1_FIELDS",
-           "gfm_from_andes", "VDL_OPEN_PU", "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS",
-           "IBR_MODELS", "IBR_PARAMETERS", "IBR_ROLES", "LVPL_OPEN_PU",
+__all__ = ["GfmInputs", "GfmReferences", "GfmSignals", "IQR_ZERO_IS_OPEN", "REECB1", "REECCU1", "REGCB1",
+           "REGCV1", "REGCV1_FIELDS", "TG_BYPASS_S", "gfm_from_andes", "record_readings", "VDL_OPEN_PU",
+           "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS",
+           "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
-           "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "ElectricalInputs", "ElectricalReferences",
+           "REECA1", "REGCA1", "REPCA1", "V_FLOOR_PU", "WTARA1", "WTDTA1", "WTPTA1", "WTTQA1", "ElectricalInputs", "ElectricalReferences",
            "PlantInputs", "PlantReferences", "deadband", "ibr_from_dyr"]
