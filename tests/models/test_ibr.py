@@ -311,7 +311,7 @@ def test_vdl_tables_with_trailing_zero_points():
 
 
 def test_plants_on_different_buses_share_one_structure():
-    """REPCA1's bus ICONs are array leaves: two plants that differ only in their regulated bus
+    """REPCA1's bus ICONs and REECA1's IREG are array leaves: two plants that differ only in their regulated bus
     and branch have one tree structure (one compiled program for a case's plants)."""
     rec = " ".join(DYR.strip().splitlines()[4:6]).split()[3:-1]
     other = list(rec)
@@ -319,3 +319,9 @@ def test_plants_on_different_buses_share_one_structure():
     a, b = ibr_from_dyr("REPCA1", rec), ibr_from_dyr("REPCA1", other)
     assert int(b.regulated_bus) == 120489 and b.branch.tolist() == [120489, 120490]
     assert jax.tree_util.tree_structure(a) == jax.tree_util.tree_structure(b)
+    # REECA1's IREG too (as REECB1's)
+    elec = " ".join(DYR.strip().splitlines()[1:4]).split()[3:-1]
+    remote = ["120489", *elec[1:]]
+    e_a, e_b = ibr_from_dyr("REECA1", elec), ibr_from_dyr("REECA1", remote)
+    assert int(e_b.remote_bus) == 120489
+    assert jax.tree_util.tree_structure(e_a) == jax.tree_util.tree_structure(e_b)

@@ -463,8 +463,9 @@ class REECA1(_ElectricalControls):
     """PFLAG: 1 Pref multiplied by the generator speed, 0 not."""
     pqflag: int = eqx.field(static=True, converter=int, default=0)
     """PQFLAG: current limit priority, 0 reactive, 1 active."""
-    remote_bus: int = eqx.field(static=True, converter=int, default=0)
-    """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal."""
+    remote_bus: Int[Array, ""] = eqx.field(converter=_as_bus, default=0)
+    """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal. An array leaf:
+    plants of different regulated buses share one compiled program (as REECB1's)."""
     vdip_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
     """Vdip: voltage below which the dip logic acts [pu]."""
     vup_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.1)
