@@ -983,11 +983,13 @@ def _derived_dyr(case, path):
 
 def _derived_entry(case):
     """truth.json's "derived_case": the function that derives the case and its docstring."""
-    f = CASES[case].get("dyr") or CASES[case].get("modify")
-    if f is None:
+    fs = [CASES[case][k] for k in ("dyr", "modify") if k in CASES[case]]
+    if not fs:
         return {}
-    constants = {n: globals()[n] for n in ("EXDC2_VR_LIMIT", "XD2_OVER_XL") if n in f.__doc__}
-    return {"derived_case": {"function": f.__name__, "description": " ".join(f.__doc__.split()),
+    constants = {n: globals()[n] for n in ("EXDC2_VR_LIMIT", "XD2_OVER_XL", "VSG_REGCV1")
+                 if any(n in f.__doc__ for f in fs)}
+    return {"derived_case": {"function": " + ".join(f.__name__ for f in fs),
+                             "description": " ".join(" ".join(f.__doc__.split()) for f in fs),
                              "constants": constants}}
 
 
@@ -1038,6 +1040,46 @@ def npcc_xd2_below_xl(ss):
 
 CASES["npcc_exdc2"] = dict(CASES["npcc"], dyr=npcc_exdc2)
 CASES["npcc_xd2_below_xl"] = dict(CASES["npcc"], modify=npcc_xd2_below_xl)
+
+
+# ----------------------------------------------------------------------------------------------------
+# derived cases with inverter-based plants beside the machines (issue 44, "machines beside inverters")
+# ----------------------------------------------------------------------------------------------------
+# ieee14's synchronous unit at bus 8 (GENROU + TGOV1 + ESST3A, P = 0.35 pu) replaced by an
+# inverter-based plant on the same static generator, so that the power flow is unchanged; the four
+# other GENROU machines (buses 1, 2, 3, 6) are recorded. Only the machines are scored
+# (``beside_ibr.py``): the plants' models need not follow the WECC specification here, and are
+# ANDES's own cases' as shipped:
+# * ieee14_solar: ANDES's ``ieee14_solar.xlsx`` (REGCA1 + REECA1 + REPCA1 at bus 8);
+# * ieee14_wt3: ANDES's ``ieee14_wt3.xlsx`` (a type-3 wind plant: REGCA1 + REECA1 + REPCA1 +
+#   WTDTA1 + WTARA1 + WTPTA1 + WTTQA1 at bus 8);
+# * ieee14_vsg: this bench's ieee14 .raw/.dyr without the bus-8 records, and a virtual synchronous
+#   generator (REGCV1, the constants of experiments/andes_gfm/generate.py: M = 8 s, D = 2) there.
+# Run with --scenario line_trip load_step gen_trip --no-verify.
+
+VSG_REGCV1 = dict(Sn=100.0, fn=60.0, Tc=0.01, kw=0.0, kv=0.0, M=8.0, D=2.0, ra=0.0, xs=0.2,
+                  Kpvd=0.5, Kivd=0.02, Kpvq=0.5, Kivq=0.02, KpId=0.2, KiId=0.01, KpIq=0.2, KiIq=0.01)
+"""REGCV1 at bus 8 of ieee14_vsg (ANDES's names and units; H = M/2 = 4 s on Sn)."""
+
+
+def ieee14_without_bus8(text):
+    """ieee14 (this bench's .dyr) without the records of bus 8 (GENROU, TGOV1, ESST3A): the static
+    generator there is taken by the REGCV1 that ``ieee14_add_vsg`` adds."""
+    records = [r for r in text.split("/") if r.strip()]
+    return "/".join(r for r in records if int(r.split()[0]) != 8) + "/\n"
+
+
+def ieee14_add_vsg(ss):
+    """A REGCV1 (VSG_REGCV1) on the static generator of bus 8."""
+    gen = [g for g, b in zip(ss.PV.idx.v, ss.PV.bus.v) if int(b) == 8][0]
+    ss.add("REGCV1", dict(idx="VSG_8", bus=8, gen=gen, **VSG_REGCV1))
+
+
+_IEEE14_BENCH = (str(DATA / "ieee14" / "ieee14.raw"), str(DATA / "ieee14" / "ieee14.dyr"))
+CASES["ieee14_solar"] = dict(CASES["ieee14"], files=("ieee14/ieee14_solar.xlsx",))
+CASES["ieee14_wt3"] = dict(CASES["ieee14"], files=("ieee14/ieee14_wt3.xlsx",))
+CASES["ieee14_vsg"] = dict(CASES["ieee14"], files=_IEEE14_BENCH, dyr=ieee14_without_bus8,
+                           modify=ieee14_add_vsg)
 
 
 # ----------------------------------------------------------------------------------------------------
@@ -1479,7 +1521,8 @@ def write_manifest():
                  f"{t['andes_version']}); recorded: {t['selection_rule']}.", ""]
         if "derived_case" in t:
             d = t["derived_case"]
-            consts = ", ".join(f"{k} = {v:g}" for k, v in d.get("constants", {}).items())
+            consts = ", ".join(f"{k} = {v:g}" if isinstance(v, int | float) else f"{k} = {json.dumps(v)}"
+                           for k, v in d.get("constants", {}).items())
             rows += [f"Derived by `{d['function']}` in generate.py: {d['description']}"
                      + (f" ({consts})" if consts else ""), ""]
         if t["added_to_case"]:
