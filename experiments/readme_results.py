@@ -39,6 +39,19 @@ def block() -> str:
             f"Of the event recordings within 5 % of the truth, {bench['sharpness']['events']['identified']} of "
             f"{bench['sharpness']['events']['within_5pct']} are `identified` (all recordings: "
             f"{bench['sharpness']['all']['identified']} of {bench['sharpness']['all']['within_5pct']}).")
+    bi = load("experiments/andes_bench/beside_ibr.json")
+    if bi:
+        w, c = bi["with_inverters"], bi["cases"]["ieee14"]
+        out.append(
+            f"- **Machines beside inverter-based plants** (`experiments/andes_bench/beside_ibr.md`, `python "
+            f"experiments/andes_bench/beside_ibr.py`): ieee14 with a PV plant, a type-3 wind plant or a "
+            f"virtual synchronous generator in place of its bus-8 machine (ANDES), three events: the four "
+            f"machines' H within 2 % of the truth on {100 * w['within_2pct']:.0f} % of {w['recordings']} "
+            f"recordings (line trips {100 * w['line_trip_within_2pct']:.0f} %), within 5 % on "
+            f"{100 * w['within_5pct']:.0f} %; `identified` more than 10 % off: {w['identified_over_10pct_off']}; "
+            f"`identified` with an interval that misses the truth: {w['identified_interval_misses']}. Without "
+            f"the inverter plant: {100 * c['within_2pct']:.0f} %, {100 * c['line_trip_within_2pct']:.0f} %, "
+            f"{100 * c['within_5pct']:.0f} % of {c['recordings']}.")
     pb = load("experiments/andes_bench/playback.json")
     if pb:
         s = pb["summary"]
