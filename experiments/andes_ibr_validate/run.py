@@ -41,14 +41,16 @@ jax.config.update("jax_enable_x64", True)
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 CASE = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
-BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed", "fault"), ".csv.gz"),
+# the fault of generate.py stops in ANDES (its Newton step fails after the clearing, at 1.16 s):
+# the REPCA1 bench has three events; Kqv (a voltage dip) is planted on the andes_ibr bench
+BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed"), ".csv.gz"),
            "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault"), ".csv")}
 BENCH = next((a for a in sys.argv[1:] if not a.startswith("-")), "andes_ibr_validate")
 STEM = "results" if BENCH == "andes_ibr_validate" else f"results_{BENCH}"
 DATA, EVENTS, SUFFIX = BENCHES[BENCH]
 COLS = ('time = "time_s", frequency = "B8/F", v_mag = "B8/VM", v_ang = "B8/VA", i_mag = "B8/IM", '
         'i_ang = "B8/IA"')
-PLANTED = ((("REECA1", "Kqv"), ("REPCA1", "Ddn"), ("REPCA1", "Kp"), ("REPCA1", "Ki"))
+PLANTED = ((("REPCA1", "Ddn"), ("REPCA1", "Kp"), ("REPCA1", "Ki"))
            if BENCH == "andes_ibr_validate" else (("REECA1", "Kqv"),))
 FACTORS = (0.7, 1.3)
 # PSS/E order of the records' values after ``bus 'MODEL' id`` (jaxdse.IBR_FIELDS)
