@@ -1,9 +1,10 @@
 """``jaxdse validate`` on the inverter-based plant of ``generate.py`` (REGCA1 + REECA1 + REPCA1,
 ANDES 2.0.0): the true records against every recording, and planted errors found again.
 
-    .venv/bin/python experiments/andes_ibr_validate/run.py [andes_ibr] [--joint]
+    .venv/bin/python experiments/andes_ibr_validate/run.py [andes_ibr] [--joint] [--model-error=X]
 
-``--joint``: also the true records on all recordings jointly.
+``--joint``: also the true records on all recordings jointly; ``--model-error=X``: [calibrate]
+model_error = X (default 1 %), results_model_error_X.*.
 ``andes_ibr``: the bench of ``experiments/andes_ibr`` instead (REGCA1 + REECA1, REPCA1 off; its
 records match ANDES within 0.01 % of MBASE): three recordings, planted Kqv only. The REPCA1 bench
 of ``generate.py`` does not yet agree with ANDES (see results.md), so that is the one run.
@@ -46,7 +47,10 @@ CASE = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
 BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed"), ".csv.gz"),
            "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault"), ".csv")}
 BENCH = next((a for a in sys.argv[1:] if not a.startswith("-")), "andes_ibr_validate")
-STEM = "results" if BENCH == "andes_ibr_validate" else f"results_{BENCH}"
+MODEL_ERROR = next((float(a.split("=")[1]) for a in sys.argv[1:] if a.startswith("--model-error=")), None)
+"""[calibrate] model_error (None: jaxdse's default, 1 %)."""
+STEM = ("results" if BENCH == "andes_ibr_validate" else f"results_{BENCH}") + (
+    "" if MODEL_ERROR is None else f"_model_error_{MODEL_ERROR:g}")
 DATA, EVENTS, SUFFIX = BENCHES[BENCH]
 COLS = ('time = "time_s", frequency = "B8/F", v_mag = "B8/VM", v_ang = "B8/VA", i_mag = "B8/IM", '
         'i_ang = "B8/IA"')
@@ -94,7 +98,8 @@ def fleet_file(tmp: Path, events, dyr_text: str, name: str) -> Path:
         f"[case]\nraw = \"case.raw\"\ndyr = \"{name}.dyr\"\n\n[measurement]\nfile = \"{events[0]}.csv\"\n"
         "location = \"terminal\"\nvoltage_unit = \"pu\"\ncurrent_unit = \"pu\"\nangle_unit = \"deg\"\n"
         "s_base_mva = 100.0\nmin_segment_s = 5.0\n\n[[unit]]\nname = \"B8_PV\"\nbus = 8\n"
-        f"columns = {{{COLS}}}\n\n[calibrate]\nevents = [{more}]\n")
+        f"columns = {{{COLS}}}\n\n[calibrate]\nevents = [{more}]\n"
+        + ("" if MODEL_ERROR is None else f"model_error = {MODEL_ERROR}\n"))
     return path
 
 
@@ -114,7 +119,7 @@ def main():
         if m and m.group(1) in FIELDS:
             rows[m.group(1)] = m.group(2).split()
     truth = {(mod, lab): float(rows[mod][FIELDS[mod].index(lab)]) for mod, lab in PLANTED}
-    out = {"bench": BENCH, "events": list(EVENTS), "per_recording": [], "joint": None, "planted": []}
+    out = {"bench": BENCH, "model_error": MODEL_ERROR, "events": list(EVENTS), "per_recording": [], "joint": None, "planted": []}
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         for e in EVENTS:
@@ -141,6 +146,9 @@ def main():
                 "filed_error_percent": 100 * (row["filed_value"] - x_true) / x_true,
                 "truth_in_ci": None if row.get("ci95") is None else row["ci95"][0] <= x_true <= row["ci95"][1],
                 "changed": changed, "unplanted_changed": [c for c in changed if c != label],
+                "unplanted": [{"parameter": r["parameter"], "truth": r["dyr_value"], "filed_value": r["filed_value"],
+                               "ci95": r.get("ci95")}
+                              for r in u["parameters"] if r["status"] == "changed" and r["parameter"] != label],
                 "outcome": u["outcome"], "status": row["status"], "wall_s": u["wall_s"],
                 "calibrated_dyr": u["calibrated_dyr"]})
             r = out["planted"][-1]
@@ -167,7 +175,8 @@ def _f(x, spec=".4g"):
 def markdown(out) -> str:
     lines = [f"# `jaxdse validate` on an inverter-based plant (ANDES 2.0.0, bench experiments/{out['bench']})", "",
              f"Made by `.venv/bin/python experiments/andes_ibr_validate/run.py {out['bench']}"
-             + (" --joint" if out["joint"] else "") + "`.", "",
+             + (" --joint" if out["joint"] else "")
+             + ("" if out.get("model_error") is None else f" --model-error={out['model_error']:g}") + "`.", "",
              f"## True records: {sum(r['pass'] for r in out['per_recording'])} of {len(out['per_recording'])} "
              f"recordings pass ({100 * out['pass_rate']:.0f} %)", "",
              "| recording | outcome | P RMS [% MBASE] | Q RMS [% MBASE] | identifiable |", "|---|---|---|---|---|"]
@@ -186,7 +195,32 @@ def markdown(out) -> str:
         lines.append(f"| {r['model']} {r['parameter']} | x{r['factor']} | {r['dyr_value']:.4g} | {r['truth']:.4g} | "
                      f"{_f(r['calibrated_value'])} | {err} | {ci} | {r['truth_in_ci']} | {r['filed_value']:.4g} | "
                      f"{', '.join(r['changed']) or 'nothing'} |")
+    other = [(r, x) for r in out["planted"] for x in r.get("unplanted", [])]
+    if other:
+        lines += ["", "Unplanted parameters changed (their .dyr value is the truth):", "",
+                  "| planted | changed | truth | filed | error | 95 % interval |", "|---|---|---|---|---|---|"]
+        for r, x in other:
+            ci = "–" if x["ci95"] is None else f"{x['ci95'][0]:.4g} – {x['ci95'][1]:.4g}"
+            lines.append(f"| {r['parameter']} x{r['factor']} | {x['parameter']} | {x['truth']:.4g} | "
+                         f"{x['filed_value']:.4g} | {100 * (x['filed_value'] - x['truth']) / x['truth']:+.2f} % | {ci} |")
+    if out["bench"] == "andes_ibr_validate":
+        lines += ["", NOTES]
     return "\n".join(lines) + "\n"
+
+
+NOTES = """## Notes
+
+* Three recordings: the fault of `generate.py` stops in ANDES (its Newton iteration fails after
+  the clearing, at 1.16 s), so REECA1's Kqv is planted on the `andes_ibr` bench instead
+  (`results_andes_ibr.md`); here the three events keep |V| inside [Vdip, Vup] and Kqv is left
+  at its .dyr value with that reason on every run.
+* Each recording alone leaves Ddn or Dup (the one its frequency does not move) at its value
+  with that reason: the load step only under-frequency (Dup), the load shed and the line trip
+  over-frequency (Ddn).
+* Kp comes out 1.2-1.8 % below ANDES's 2.0 on these recordings with an interval narrower than
+  that (1 % model error): on the joint runs it is rejected and changed even when it is not the
+  planted one. That is the playback's own error against ANDES in the voltage loop (not
+  diagnosed); `--model-error=0.02` shows the same runs with 2 %."""
 
 
 if __name__ == "__main__":
