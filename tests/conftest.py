@@ -217,6 +217,7 @@ LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_play
                  "tests/stream/test_monitor.py", "demo", "tests/models/test_machines_new.py",
                  "tests/core/test_estimate.py", "tests/stream/test_windowed.py",
                  "tests/models/test_ibr_pv.py", "tests/app/test_check_pv.py",  # (added 2026-11-29)
+                 "tests/app/test_ibr_validate.py",  # (added 2026-11-29: 48 s CPU alone, 3 IBR fit programs)
                  "tests/models/test_governors.py", "tests/app/test_fleet.py", "tests/core/test_events.py",
                  "tests/models/test_stabilisers_pss2.py", "tests/many/test_stream.py",
                  "tests/many/test_batch.py", "isone", "tests/models/test_exciters.py",

@@ -114,15 +114,28 @@ def test_ibr_plant_page_shows_p_f_and_q_v(ibr_run):
     assert "B8_PV" in (tmp / "out" / "report.html").read_text()
 
 
-def test_validate_says_ibr_calibration_is_not_supported(tmp_path):
-    """``jaxdse validate`` on the plant: skipped in one line that says why (nothing compiled)."""
+def test_validate_ranks_the_ibr_plant(tmp_path):
+    """``jaxdse validate`` on the plant: ranked (not skipped); the line trip keeps |V| inside
+    [Vdip, Vup], so REECA1's Kqv (the one default parameter without a plant controller) moves
+    neither P nor Q: left at its .dyr value with that reason, nothing filed."""
     path = _case(tmp_path)
     assert main(["validate", str(path), "--out", str(tmp_path / "val")]) == 0
     (u,) = json.loads((tmp_path / "val" / "validate.json").read_text())["units"]
-    assert u["name"] == "B8_PV" and "\n" not in u["skipped"]
-    assert u["skipped"].startswith("an inverter-based plant: ranking and calibration of IBR records")
-    assert "not yet supported" in u["skipped"]
-    assert (tmp_path / "val" / "calibrated.dyr").exists()
+    assert u["name"] == "B8_PV" and "skipped" not in u
+    assert u["models"] == {"converter": "REGCA1", "electrical": "REECA1"}
+    assert u["outcome"] == "nothing identifiable" and not u["calibrated"]
+    (row,) = u["parameters"]
+    assert row["parameter"] == "Kqv" and row["model"] == "REECA1" and row["dyr_value"] == 2.0
+    assert not row["identifiable"] and row["status"] == "not identifiable: .dyr kept"
+    assert "sensitivity 0" in row["why_not"] and "Vdip" in row["why_not"]
+    assert row["filed_value"] == 2.0
+    # ANDES's P and Q: the records' playback within 0.05 % of MBASE (as `jaxdse fleet`)
+    (ev,) = u["per_event"]
+    assert ev["before_rms_percent_mbase"]["P_t"] < 0.05 and ev["before_rms_percent_mbase"]["Q_t"] < 0.05
+    dyr = (tmp_path / "val" / "calibrated.dyr").read_text().splitlines()
+    assert len(dyr) == 1 and dyr[0].startswith("@!")
+    page = (tmp_path / "val" / "units" / "B8_PV.html").read_text()
+    assert "REGCA1 / REECA1 / -" in page and "Vdip" in page
 
 
 @pytest.mark.parametrize("playback, electrical, why", [

@@ -54,6 +54,7 @@ from .._io.psse_dyr import repair_comment
 from .._io.readers import load_table
 from .._models.exciters import _ATTRIBUTES as EXCITER_ATTRIBUTES
 from .._models.exciters import EXCITER_FIELDS
+from .._models.ibr import IBR_FIELDS, IBR_PARAMETERS, IBR_ROLES
 from .._models.stabilisers import STABILISER_FIELDS
 from .._version import __version__
 from .dyr_fleet import plant_model, terminal_series
@@ -74,9 +75,25 @@ DEFAULT_PARAMETERS = {
     "GAST": (("r_pu", "R"), ("t1_s", "T1")),
     "HYGOV": (("r_pu", "R"), ("tg_s", "Tg")),
     "GGOV1": (("r_pu", "R"), ("t_act_s", "Tact")),
+    "REECA1": (("kqv", "Kqv"),),
+    "REECB1": (("kqv", "Kqv"),),
+    "REECCU1": (("kqv", "Kqv"),),
+    "REPCA1": (("kp", "Kp"), ("ki", "Ki"), ("ddn_pu", "Ddn"), ("dup_pu", "Dup")),
 }
 """The default parameter set per model: H and D, the exciter's main gain and time constant, the
-governor's droop (IEEEG1: its gain K = 1/R) and main time constant."""
+governor's droop (IEEEG1: its gain K = 1/R) and main time constant; of an inverter-based plant
+the gains an engineer tunes on site (its time constants are mostly below a frame period): the
+electrical controls' voltage-dip reactive gain Kqv, the plant controller's voltage-loop PI gains
+Kp, Ki and its frequency droops Ddn (over-frequency) and Dup (under-frequency)."""
+IBR_PARTS = ("electrical", "plant")
+"""The parts of an inverter-based plant (:class:`~jaxdse._dyr.ibr_unit.IbrUnit`) calibrated."""
+MACHINE_PARTS = ("machine", "exciter", "governor")
+DROOPS = ("Ddn", "Dup")
+"""REPCA1's droops: 0 is a valid setting (no droop that way), bounded like D from 0."""
+DROOP_BOUNDS = (0.0, 100.0)
+"""Default bounds of Ddn and Dup [pu power / pu frequency] (100: a 1 % droop)."""
+DIP_ONLY = {"Kqv": "it acts only while |V| is outside [Vdip, Vup] (a voltage dip or rise)"}
+"""When a parameter moves the output at all, said with its reason when these events do not."""
 D_BOUNDS = (0.0, 20.0)
 """Default bounds of D [pu torque / pu speed]: physical (D >= 0), and it may sit at 0 in the .dyr."""
 
@@ -86,7 +103,7 @@ D_BOUNDS = (0.0, 20.0)
 def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterSpec]:
     """The parameters to rank and calibrate, with their bounds (``options``: CalibrateOptions)."""
     out = []
-    for part in ("machine", "exciter", "governor"):
+    for part in (IBR_PARTS if "converter" in models else MACHINE_PARTS):
         model = models.get(part)
         table = DEFAULT_PARAMETERS.get("machine" if part == "machine" else model, ())
         for field, label in table:
@@ -94,8 +111,12 @@ def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterS
                 continue
             x = float(getattr(getattr(unit, part), field))
             lo_hi = options.bounds.get(label)
-            if label == "D":
-                lo, hi = lo_hi or D_BOUNDS
+            if label == "D" or label in DROOPS:
+                lo, hi = lo_hi or (D_BOUNDS if label == "D" else DROOP_BOUNDS)
+                if not lo <= x <= hi:
+                    notes.append(f"{label} = {x:g} lies outside its bounds [{lo:g}, {hi:g}]: "
+                                 "not calibrated")
+                    continue
                 out.append(ParameterSpec(part, field, label, lo, hi, positive=False))
                 continue
             if not x > 0:
@@ -109,6 +130,14 @@ def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterS
                 continue
             out.append(ParameterSpec(part, field, label, float(lo), float(hi)))
     return out
+
+
+def explain(ranking, specs):
+    """``ranking`` with the reason a parameter that these events leave at sensitivity 0 has
+    none (:data:`DIP_ONLY`: Kqv without a voltage dip) added to its sentence."""
+    return ranking._replace(reasons=[
+        r + (f" ({DIP_ONLY[s.label]})" if s.label in DIP_ONLY and "sensitivity 0" in r else "")
+        for r, s in zip(ranking.reasons, specs)])
 
 
 # --- events -----------------------------------------------------------------------------------
@@ -148,12 +177,6 @@ def _pad(series_list):
 
 # --- running ----------------------------------------------------------------------------------
 
-IBR_NOT_CALIBRATED = ("an inverter-based plant: ranking and calibration of IBR records (REGCA1, REGCB1, "
-                      "REECA1, REECB1, REECCU1, REPCA1) are not yet supported; `jaxdse fleet` plays its records back and "
-                      "validates them (P against frequency, Q against voltage)")
-"""Why ``jaxdse validate`` skips an inverter-based plant (one line)."""
-
-
 def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     """Validate and calibrate every one-unit plant of ``fleet``; write the outputs."""
     t_start = time.perf_counter()
@@ -173,13 +196,6 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
     tables, units, changed = {}, [], []
     for p in fleet.plants:
         entry = {"name": p.name, "bus": p.bus, "events": files}
-        if p.ibr:
-            entry["skipped"] = IBR_NOT_CALIBRATED
-            units.append(entry)
-            progress.done += len(recordings) + 2
-            progress.step(f"{p.name}: skipped")
-            print(f"jaxdse: warning: {p.name}: not validated: {entry['skipped']}", file=stream)
-            continue
         pm = plant_model(fleet.raw, fleet.dyr, p, fleet.playback)
         if len(pm.units) != 1 or pm.fallback:
             entry["skipped"] = pm.fallback or (f"{len(pm.units)} units behind one PMU: played back in "
@@ -206,7 +222,7 @@ def run_validate(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         events = _pad(series)
         notes = list(um.notes)
         specs = parameter_specs(um.unit, um.models, opts, notes)
-        ranking = rank(um.unit, specs, events, fit_settings, cal)
+        ranking = explain(rank(um.unit, specs, events, fit_settings, cal), specs)
         free = ranking.identifiable
         progress.step(f"{p.name}: ranked {len(specs)} parameter(s), {int(free.sum())} identifiable")
         decision = (calibrate_where_rejected(um.unit, specs, events, fit_settings, cal, free=free)
@@ -325,7 +341,10 @@ def _pq(s):
 # --- calibrated.dyr ---------------------------------------------------------------------------
 
 def _con_index(record_model: str, part: str, field: str) -> int:
-    """Position of a module field among the record's constants."""
+    """Position of a module field among the record's constants (an IBR record's: its ICONs
+    then CONs, as :func:`jaxdse.ibr_from_dyr` reads them)."""
+    if record_model in IBR_PARAMETERS:
+        return IBR_FIELDS[record_model].index(IBR_PARAMETERS[record_model][field])
     if part == "machine":
         names = MACHINE_FIELDS[record_model]
         return names.index({"h_s": "H", "d_pu": "D"}[field])
@@ -348,9 +367,12 @@ def calibrated_dyr(fleet: Fleet, changed) -> str:
     for p, um, decision in changed:
         recs = {r.kind if r.kind != "other" else _part_of(r.model): r
                 for r in fleet.dyr.unit_records(p.bus, um_id(p))}
+        if p.ibr:
+            recs = {IBR_ROLES[r.model]: r for r in fleet.dyr.unit_records(p.bus, um_id(p))
+                    if r.model in IBR_ROLES}
         fit = decision.fit
         specs = {s.label: s for s in fit.specs}
-        for part in ("machine", "exciter", "governor"):
+        for part in (IBR_PARTS if p.ibr else MACHINE_PARTS):
             mine = [(specs[lab], float(v)) for lab, v in zip(fit.labels, fit.values)
                     if lab in decision.changed and specs[lab].part == part]
             if not mine or part not in recs:
@@ -459,7 +481,9 @@ def unit_page(e: dict) -> str:
         for j, (f, x) in enumerate(zip(e["events"], e["per_event"])))
     why = "".join(f"<li>{html.escape(w)}</li>" for w in e["not_identifiable"]) or "<li>none</li>"
     notes = "".join(f"<li>{html.escape(n)}</li>" for n in e.get("notes", []))
-    models = " / ".join(e["models"].get(k, "-") for k in ("machine", "exciter", "stabiliser", "governor"))
+    parts = (("converter", "electrical", "plant") if "converter" in e["models"]
+             else ("machine", "exciter", "stabiliser", "governor"))
+    models = " / ".join(e["models"].get(k, "-") for k in parts)
     words = {
         "consistent with the .dyr": "The events do not reject the .dyr values: every identifiable "
                                     "parameter's .dyr value lies inside its 95 % interval, or the fit "
@@ -535,4 +559,4 @@ def validate(path, out_dir, stream=None) -> dict:
     return run_validate(fleet, Path(out_dir), stream)
 
 
-__all__ = ["DEFAULT_PARAMETERS", "calibrated_dyr", "parameter_specs", "run_validate", "validate"]
+__all__ = ["DEFAULT_PARAMETERS", "calibrated_dyr", "explain", "parameter_specs", "run_validate", "validate"]

@@ -55,7 +55,9 @@ class ParameterSpec:
     """One calibratable parameter of a unit: where it sits and its bounds."""
 
     part: str
-    """"machine", "exciter", "stabiliser" or "governor"."""
+    """"machine", "exciter", "stabiliser" or "governor" of a :class:`~jaxdse._dyr.unit.DyrUnit`;
+    "electrical" or "plant" (or another of ``IbrUnit.PARTS``) of an inverter-based plant's
+    :class:`~jaxdse._dyr.ibr_unit.IbrUnit`."""
     field: str
     """Field of that module (e.g. ``h_s``)."""
     label: str
@@ -293,12 +295,20 @@ def rank(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings = Play
     cov = np.linalg.pinv(fisher, rcond=1e-14)
     rel = Z95 * np.sqrt(np.maximum(np.diag(cov), 0.0))
     vif = np.diag(fisher) * np.diag(cov)
-    ok = rel < cal.max_relative_ci
+    # a parameter that moves neither P nor Q in these events (an IBR gain on a path that they
+    # never switch in) has a zero column: the pseudo-inverse would give it a zero variance
+    diag = np.diag(fisher)
+    dead = ~(diag > 1e-12 * np.max(diag, initial=0.0))
+    ok = (rel < cal.max_relative_ci) & ~dead
     reasons = []
     labels = [s.label for s in specs]
     for j, s in enumerate(specs):
         if ok[j]:
             reasons.append("")
+            continue
+        if dead[j]:
+            reasons.append(f"{s.part} {s.label}: these events do not move P or Q with it (sensitivity 0); "
+                           "left at its .dyr value")
             continue
         partner = ""
         if vif[j] > 10:
