@@ -34,6 +34,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.algebraic import q_axis_discretisation
 from .._core.drem import ObserverConfig
 from .._core.identify import IdentifySettings
 from .._core.plant import Plant
@@ -94,14 +95,23 @@ def _per_unit(chunk, recs, *batched):
 
 
 @eqx.filter_jit
-def _first(recs, plants, config, settings, ident, size, start):
-    return _per_unit(lambda r, p: window_chunk(r, p, config, settings, ident, None, size, start), recs, plants)
+def _first(recs, plants, q_disc, config, settings, ident, size, start):
+    return _per_unit(lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q),
+                     recs, plants, q_disc)
 
 
 @eqx.filter_jit
-def _next(recs, plants, carries, config, settings, ident, size):
-    return _per_unit(lambda r, p, c: window_chunk(r, p, config, settings, ident, c, size), recs, plants,
-                     carries)
+def _next(recs, plants, q_disc, carries, config, settings, ident, size):
+    return _per_unit(lambda r, p, q, c: window_chunk(r, p, config, settings, ident, c, size, q_disc=q),
+                     recs, plants, q_disc, carries)
+
+
+@eqx.filter_jit
+def _q_discs(plants, dt):
+    """Each unit's q-axis discretisation at ``dt`` (None without ``Machine.q_axis``): once per group."""
+    if plants.machine.q_axis is None:
+        return None
+    return jax.vmap(lambda m: q_axis_discretisation(m, dt))(plants.machine)
 
 
 @eqx.filter_jit
@@ -171,6 +181,7 @@ class OnlineGroup:
         self.segment = np.zeros(self.u, np.int64)
         self.started = np.zeros(self.u, bool)             # the segment's first chunk is done
         self.small = -(-self.u // SMALL_SHARE) if self.u >= MIN_SMALL else 0   # rows of the few-units batch
+        self.q_disc = _q_discs(self.plants, self.dt)   # the slices' step: t_s = arange(span) dt
         self.carries = None
         self.ring = None
         self.filled = np.zeros(self.u, np.int32)   # blocks in each ring (host: a restart is no device op)
@@ -247,11 +258,11 @@ class OnlineGroup:
                              i_mag_pu=0.5 * one, i_ang_rad=-0.1 * one,
                              f_hz=one * f_nom if self.with_frequency else None, location=self.location)
 
-        def programs(n, plants):
-            blocks, carries = _first(flat(self.span + self.start, n), plants, self.config, self.settings,
+        def programs(n, plants, q_disc):
+            blocks, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config, self.settings,
                                      self.ident, self.size, self.start)
-            blocks, carries = _next(flat(self.span, n), plants, carries, self.config, self.settings, self.ident,
-                                    self.size)
+            blocks, carries = _next(flat(self.span, n), plants, q_disc, carries, self.config, self.settings,
+                                    self.ident, self.size)
             ring = _empty_ring(blocks, self.window.blocks)
             if n == self.u:
                 _where(jnp.ones(n, bool), carries, carries)
@@ -260,10 +271,10 @@ class OnlineGroup:
                 self.verdict_settings))
             return carries, ring
 
-        carries, ring = programs(self.u, self.plants)
+        carries, ring = programs(self.u, self.plants, self.q_disc)
         if self.small:
             rows = np.zeros(self.small, np.int64)
-            small = programs(self.small, _take(self.plants, rows))
+            small = programs(self.small, *_take((self.plants, self.q_disc), rows))
             _take(carries, rows), _take(ring, rows)
             jax.block_until_ready(_put((carries, ring), rows, small))
 
@@ -333,13 +344,14 @@ class OnlineGroup:
         first = not self.started[units[0]]
         whole = not (self.small and units.size <= self.small)
         rows = np.arange(self.u) if whole else np.resize(units, self.small)   # the batch's units
-        plants = self.plants if whole else _take(self.plants, rows)
+        plants, q_disc = (self.plants, self.q_disc) if whole else _take((self.plants, self.q_disc), rows)
         if first:
             recs = self._batch(rows, ready[rows], self.span + self.start)
-            blocks, carries = _first(recs, plants, self.config, self.settings, self.ident, self.size, self.start)
+            blocks, carries = _first(recs, plants, q_disc, self.config, self.settings, self.ident, self.size,
+                                     self.start)
         else:
             recs = self._batch(rows, ready[rows], self.span)
-            blocks, carries = _next(recs, plants, self.carries if whole else _take(self.carries, rows),
+            blocks, carries = _next(recs, plants, q_disc, self.carries if whole else _take(self.carries, rows),
                                     self.config, self.settings, self.ident, self.size)
         if self.carries is None:     # every row from the first ready unit's until its own chunk
             self.carries, self.ring = _take((carries, _empty_ring(blocks, self.window.blocks)),
