@@ -20,7 +20,9 @@ unit, as the file readers do (``jaxdse._io.measurement``):
 
 After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
 intervals and the verdict of the window). Three compiled programs per group: a segment's first
-chunk, the chunks after it, and the window estimate.
+chunk, the chunks after it, and the window estimate; each on the whole group and, for a chunk
+that few units are ready for (a restarted unit catching up), on a small batch
+(:data:`SMALL_SHARE`).
 """
 
 from __future__ import annotations
