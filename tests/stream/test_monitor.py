@@ -126,6 +126,47 @@ def test_short_gaps_are_bridged_long_ones_restart(example):
     assert second[0].t - (BASE + 1020) / 25 >= 20.0
 
 
+def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, monkeypatch):
+    """A unit restarted by a long gap catches up one chunk a frame while the others wait: those
+    chunks run on the group's small batch (its rows gathered, the results scattered back), and
+    give each unit the updates it gets alone, to round-off (``online.SMALL_SHARE``: here a
+    group of 2 units with a 1-row small batch)."""
+    from jaxdse._stream import online
+
+    _, g, rec = example
+    rec = _head(rec, 1750)                                     # 70 s
+    window = WindowSettings(update_s=1.0, window_s=20.0)
+    usable = np.ones((1750, 2), bool)
+    usable[1000:1020, 1] = False                               # 0.8 s: unit 1 restarts
+    monkeypatch.setattr(online, "MIN_SMALL", 2)
+    monkeypatch.setattr(online, "SMALL_SHARE", 2)
+    taken = []
+    take = online._take
+    monkeypatch.setattr(online, "_take", lambda *a: taken.append(1) or take(*a))
+    pair = OnlineGroup(["a", "b"], [g.plant] * 2, [rec.location] * 2, 25.0, window)
+    assert pair.small == 1
+    alone = [OnlineGroup([n], [g.plant], [rec.location], 25.0, window) for n in "ab"]
+    assert alone[0].small == 0
+    got = {"a": [], "b": []}
+    want = {"a": [], "b": []}
+    for k in range(1750):
+        x = [rec.v_mag_pu[k], rec.v_ang_rad[k], rec.i_mag_pu[k], rec.i_ang_rad[k], rec.f_hz[k]]
+        for u in pair.push(BASE + k, *[[v, v] for v in x], usable[k]):
+            got[u.unit].append(u)
+        for j, grp in enumerate(alone):
+            for u in grp.push(BASE + k, *[[v] for v in x], [usable[k, j]]):
+                want[u.unit].append(u)
+    assert taken                                               # the small batch ran
+    assert {u.segment for u in got["b"]} == {1, 2}
+    for n in "ab":
+        assert [u.t for u in got[n]] == [u.t for u in want[n]] and got[n]
+        for u, w in zip(got[n], want[n]):
+            assert (u.verdict, u.segment, u.samples) == (w.verdict, w.segment, w.samples)
+            assert u.h_s == pytest.approx(w.h_s, rel=1e-12)
+            assert u.h_ci95 == pytest.approx(w.h_ci95, rel=1e-12)
+            assert u.d_pu_s == pytest.approx(w.d_pu_s, rel=1e-10)
+
+
 def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     config, _, _ = example
     source = load_source(config)

@@ -43,7 +43,7 @@ class AlgebraicStates(eqx.Module):
 
 
 def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None, dt=None,
-                       q_state0=None) -> AlgebraicStates:
+                       q_state0=None, q_disc=None) -> AlgebraicStates:
     """States from terminal phasors expressed in a frame rotated by ``theta_ref``.
 
     ``v_t`` and ``i_t`` [pu, machine base] are the terminal phasors multiplied by
@@ -51,7 +51,9 @@ def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None, dt=None
     voltage angle), so large angles never pass through ``arg`` and need no unwrapping.
     ``rel0``: when a stream continues, the angle delta - theta_ref at the first sample as the
     previous chunk unwrapped it (keeps the unwrapping continuous). ``dt`` [s] (the sample
-    interval) and ``q_state0`` (the carried q-axis state) are used with ``machine.q_axis``.
+    interval) and ``q_state0`` (the carried q-axis state) are used with ``machine.q_axis``;
+    ``q_disc``: its :func:`q_axis_discretisation` at ``dt`` where already computed (a stream's
+    chunks share it).
     """
     z_q, x_diff = hoist(machine.rs_pu + 1j * machine.xq_pu, machine.xq_pu - machine.xd1_pu)
     psi = z_q * i_t + v_t
@@ -63,7 +65,7 @@ def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None, dt=None
     e_q1 = psi_mag - x_diff * i_d
     q_state = None
     if machine.q_axis is not None:
-        corr, q_state = q_axis_lag(dq, psi_mag, machine.q_axis, machine.xq_pu, dt, q_state0)
+        corr, q_state = q_axis_lag(dq, psi_mag, machine.q_axis, machine.xq_pu, dt, q_state0, disc=q_disc)
         rel = rel + corr
     return AlgebraicStates(
         delta_rad=theta_ref + rel,
@@ -75,15 +77,22 @@ def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None, dt=None
     )
 
 
-def q_axis_lag(dq, psi_mag, q: QAxisCircuits, xq, dt, state0=None, iterations: int = 2):
+def q_axis_discretisation(machine: Machine, dt):
+    """(Phi, G0, G1) of the q-axis circuits of ``machine`` (``Machine.q_axis``) over a step ``dt``."""
+    a, b, _ = machine.q_axis.state_space(machine.xq_pu)
+    return hold_discretisation(a, b, dt)
+
+
+def q_axis_lag(dq, psi_mag, q: QAxisCircuits, xq, dt, state0=None, iterations: int = 2, disc=None):
     """The angle delta - arg psi [rad] per sample, and the q-axis states [E'd, psi'q, Iq].
 
     ``dq`` = Id + j Iq in the frame of psi. The states move exactly between samples for an Iq
     linear in time (first-order hold); the Iq of a sample depends on its own correction, found
     by ``iterations`` fixed-point steps (the correction is small: one step is within 1e-6 rad).
+    ``disc``: (Phi, G0, G1) over ``dt`` where already computed (:func:`q_axis_discretisation`).
     """
     a, b, c = q.state_space(xq)
-    phi, g0, g1 = hold_discretisation(a, b, dt)
+    phi, g0, g1 = hold_discretisation(a, b, dt) if disc is None else disc
     gap = xq - q.xq2_pu
 
     def corrected(x_prev, iq_prev, k_dq, k_psi, corr):

@@ -64,8 +64,10 @@ class FrontEnd(NamedTuple):
 
 
 def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(),
-              context: StreamContext | None = None) -> FrontEnd:
-    """Mapping to the terminal, algebraic observer and measured speed, for every sample."""
+              context: StreamContext | None = None, q_disc=None) -> FrontEnd:
+    """Mapping to the terminal, algebraic observer and measured speed, for every sample
+    (``q_disc``: :func:`~jaxdse._core.algebraic.q_axis_discretisation` at the recording's
+    step, where a stream has it already)."""
     if not jax.config.jax_enable_x64:  # every entry point (estimate, identify, replay) passes here
         raise RuntimeError("jaxdse computes in float64 (a 600 s recording's time axis and the "
                            "angle differences lose digits in float32): call "
@@ -87,7 +89,7 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     mapped = map_to_terminal(v_meas, i_meas, plant.line, plant.transformer, plant.aux,
                              recording.location, ctx.p_lv_sum, ctx.p_lv_count)
     i_t = mapped.i_sg * plant.current_scale
-    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0)
+    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0, q_disc)
     f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
     if recording.f_hz is not None:  # the channel where it has a value, else the derived one
         f_hz = jnp.where(jnp.isnan(recording.f_hz), f_hz, recording.f_hz)

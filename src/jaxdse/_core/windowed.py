@@ -156,7 +156,7 @@ def halo(settings: Settings) -> int:
 
 def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings: Settings,
                  identify_settings: IdentifySettings, carry: Carry | None, size: int,
-                 start: int = 0) -> tuple[Blocks, Carry]:
+                 start: int = 0, q_disc=None) -> tuple[Blocks, Carry]:
     """One chunk of a stream: its block of sufficient statistics and the carry to the next.
 
     Arguments:
@@ -170,13 +170,16 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
             ``qss_window_s``, and the governor's state comes from the slice's quiet part
             (:func:`~jaxdse._core.identify.governor_start`), as the batch fit's do.
         start: see ``rec`` (:meth:`WindowSettings.start_samples`; 0 with a carry).
+        q_disc: the q-axis circuits' discretisation at the stream's step
+            (:func:`~jaxdse._core.algebraic.q_axis_discretisation`), computed once for a
+            stream; None: here (``plant.machine.q_axis`` only).
 
     Pure: jit and vmap (over the units of a fleet) pass through.
     """
     s = identify_settings
     m = plant.machine
     ctx = None if carry is None else carry.context
-    fe = front_end(rec, plant, settings, ctx)
+    fe = front_end(rec, plant, settings, ctx, q_disc)
     ts = rec.t_s
     dt = ts[1] - ts[0]
     lead = halo(settings)

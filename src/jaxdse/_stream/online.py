@@ -20,7 +20,9 @@ unit, as the file readers do (``jaxdse._io.measurement``):
 
 After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
 intervals and the verdict of the window). Three compiled programs per group: a segment's first
-chunk, the chunks after it, and the window estimate.
+chunk, the chunks after it, and the window estimate; each on the whole group and, for a chunk
+that few units are ready for (a restarted unit catching up), on a small batch
+(:data:`SMALL_SHARE`).
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._core.algebraic import q_axis_discretisation
 from .._core.drem import ObserverConfig
 from .._core.identify import IdentifySettings
 from .._core.plant import Plant
@@ -78,16 +81,39 @@ class Update:
         return dataclasses.asdict(self)
 
 
-@eqx.filter_jit
-def _first(recs, plants, config, settings, ident, size, start):
-    return jax.vmap(lambda r, p: window_chunk(r, p, config, settings, ident, None, size, start))(
-        recs, plants)
+def _per_unit(chunk, recs, *batched):
+    """``chunk(rec, *args)`` of every unit, vmapped over the units (``recs``' signals [U, T] and
+    ``batched``) with the time axis ``recs.t_s`` [T] shared, not batched: the filters'
+    discretisations (matrix exponentials of dt) are then computed once per call, not once per
+    unit (at 966 units they were two thirds of a chunk's CPU time)."""
+    ts = recs.t_s
+
+    def one(v, va, im, ia, f, *args):
+        rec = Recording(t_s=ts, v_mag_pu=v, v_ang_rad=va, i_mag_pu=im, i_ang_rad=ia, f_hz=f,
+                        location=recs.location)
+        return chunk(rec, *args)
+
+    return jax.vmap(one)(recs.v_mag_pu, recs.v_ang_rad, recs.i_mag_pu, recs.i_ang_rad, recs.f_hz, *batched)
 
 
 @eqx.filter_jit
-def _next(recs, plants, carries, config, settings, ident, size):
-    return jax.vmap(lambda r, p, c: window_chunk(r, p, config, settings, ident, c, size))(recs, plants,
-                                                                                        carries)
+def _first(recs, plants, q_disc, config, settings, ident, size, start):
+    return _per_unit(lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q),
+                     recs, plants, q_disc)
+
+
+@eqx.filter_jit
+def _next(recs, plants, q_disc, carries, config, settings, ident, size):
+    return _per_unit(lambda r, p, q, c: window_chunk(r, p, config, settings, ident, c, size, q_disc=q),
+                     recs, plants, q_disc, carries)
+
+
+@eqx.filter_jit
+def _q_discs(plants, dt):
+    """Each unit's q-axis discretisation at ``dt`` (None without ``Machine.q_axis``): once per group."""
+    if plants.machine.q_axis is None:
+        return None
+    return jax.vmap(lambda m: q_axis_discretisation(m, dt))(plants.machine)
 
 
 @eqx.filter_jit
@@ -111,6 +137,15 @@ def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict
 
     idents, verdicts = jax.vmap(one)(ordered, present, plants, carries)
     return ring, filled, idents, verdicts
+
+
+SMALL_SHARE = 8
+"""A chunk that only a few units of a group are ready for (a restarted unit catching up, one
+chunk a frame, on the others; a unit whose sample came late) runs on a batch of
+ceil(U / SMALL_SHARE) rows, the ready units' (the first repeated to fill it), gathered and
+scattered back, not on the group's whole batch: at 966 units a restarted plant's 46 copies cost
+a 3.9 s first chunk and 28 whole-batch chunks after it. Groups of ``MIN_SMALL`` units or more."""
+MIN_SMALL = 16
 
 
 class OnlineGroup:
@@ -147,6 +182,8 @@ class OnlineGroup:
         self.seg_start = np.full(self.u, -1, np.int64)
         self.segment = np.zeros(self.u, np.int64)
         self.started = np.zeros(self.u, bool)             # the segment's first chunk is done
+        self.small = -(-self.u // SMALL_SHARE) if self.u >= MIN_SMALL else 0   # rows of the few-units batch
+        self.q_disc = _q_discs(self.plants, self.dt)   # the slices' step: t_s = arange(span) dt
         self.carries = None
         self.ring = None
         self.filled = np.zeros(self.u, np.int32)   # blocks in each ring (host: a restart is no device op)
@@ -211,28 +248,37 @@ class OnlineGroup:
         self.filled[units] = 0
 
     def warm_up(self):
-        """Run the group's three programs once on a flat batch (1 pu, the nominal frequency) and
-        drop the results: the compiler's time is spent now, while the window fills, and not at
-        the segment's first chunk, where frames would queue behind it (10 s on a loaded 2-core
-        machine: at 5x real time, 50 s of stream). The group's state is not touched."""
-        def flat(span):
-            one = np.ones((self.u, span))
-            f_nom = np.asarray(self.plants.machine.f_nominal_hz, float).reshape(-1, 1)
-            return Recording(t_s=one * (np.arange(span) * self.dt), v_mag_pu=one, v_ang_rad=0.0 * one,
+        """Run the group's programs once on a flat batch (1 pu, the nominal frequency), on the
+        whole group and on the few-units batch (``SMALL_SHARE``), and drop the results: the
+        compiler's time is spent now, while the window fills, and not at the segment's first
+        chunk, where frames would queue behind it (10 s on a loaded 2-core machine: at 5x real
+        time, 50 s of stream). The group's state is not touched."""
+        def flat(span, n):
+            one = np.ones((n, span))
+            f_nom = np.asarray(self.plants.machine.f_nominal_hz, float).reshape(-1, 1)[:n]
+            return Recording(t_s=np.arange(span) * self.dt, v_mag_pu=one, v_ang_rad=0.0 * one,
                              i_mag_pu=0.5 * one, i_ang_rad=-0.1 * one,
                              f_hz=one * f_nom if self.with_frequency else None, location=self.location)
 
-        blocks, carries = _first(flat(self.span + self.start), self.plants, self.config, self.settings,
-                                 self.ident, self.size, self.start)
-        blocks, carries = _next(flat(self.span), self.plants, carries, self.config, self.settings, self.ident,
-                                self.size)
-        ring = jax.tree_util.tree_map(
-            lambda b: jnp.zeros((b.shape[0], self.window.blocks) + b.shape[1:], b.dtype), blocks)
-        mask = jnp.ones(self.u, bool)
-        _where(mask, (blocks, carries), (blocks, carries))       # _chunks' two uses of it
-        _where(mask, carries, carries)
-        jax.block_until_ready(_absorb(ring, jnp.zeros(self.u, jnp.int32), blocks, jnp.ones(self.u, bool), carries,
-                                      self.plants, self.ident, self.window, self.verdict_settings))
+        def programs(n, plants, q_disc):
+            blocks, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config, self.settings,
+                                     self.ident, self.size, self.start)
+            blocks, carries = _next(flat(self.span, n), plants, q_disc, carries, self.config, self.settings,
+                                    self.ident, self.size)
+            ring = _empty_ring(blocks, self.window.blocks)
+            if n == self.u:
+                _where(jnp.ones(n, bool), carries, carries)
+            ring, _, _, _ = jax.block_until_ready(_absorb(
+                ring, np.zeros(n, np.int32), blocks, jnp.ones(n, bool), carries, plants, self.ident, self.window,
+                self.verdict_settings))
+            return carries, ring
+
+        carries, ring = programs(self.u, self.plants, self.q_disc)
+        if self.small:
+            rows = np.zeros(self.small, np.int64)
+            small = programs(self.small, *_take((self.plants, self.q_disc), rows))
+            _take(carries, rows), _take(ring, rows)
+            jax.block_until_ready(_put((carries, ring), rows, small))
 
     # --- progress ----------------------------------------------------------------------------
 
@@ -269,61 +315,74 @@ class OnlineGroup:
             x = self.buf[:, units[:, None], starts[:, None] + np.arange(span)[None, :]]   # [5, k, span]
         t = np.arange(span) * self.dt
         f = x[4] if self.with_frequency else None
-        return Recording(t_s=np.broadcast_to(t, x.shape[1:]).copy(), v_mag_pu=x[0], v_ang_rad=x[1],
+        return Recording(t_s=t, v_mag_pu=x[0], v_ang_rad=x[1],
                          i_mag_pu=x[2], i_ang_rad=x[3], f_hz=f, location=self.location)
 
-    def _full(self, units, span):
-        """A slice batch for every unit of the group (rows of the others repeat the first ready),
-        cut from the host buffer (NumPy indexing: a Recording's fields are already JAX arrays, and
-        an eager gather on each cost about 7 ms per update on a loaded 2-core machine)."""
-        rows = np.zeros(self.u, np.int64)
-        rows[units] = np.arange(units.size)
-        return self._slices(units[rows], span)
+    def _batch(self, rows, which, span):
+        """The slices of the units ``rows`` (a batch), cut from the host buffer; rows not in
+        ``which`` repeat the first that is (NumPy indexing: a Recording's fields are already JAX
+        arrays, and an eager gather on each cost about 7 ms per update on a loaded 2-core
+        machine)."""
+        return self._slices(np.where(which, rows, rows[np.argmax(which)]), span)
 
     def _chunks(self) -> list[Update]:
         span = np.where(self.started, self.span, self.span + self.start)   # a first slice: longer
         ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1)
         if not ready.any():
             return []
-        first = ready & ~self.started
-        nxt = ready & self.started
-        blocks = carries = None
-        if first.any():
-            units = np.flatnonzero(first)
-            recs = self._full(units, self.span + self.start)
-            blocks, carries = _first(recs, self.plants, self.config, self.settings, self.ident, self.size,
-                                     self.start)
-        if nxt.any():
-            units = np.flatnonzero(nxt)
-            recs = self._full(units, self.span)
-            b2, c2 = _next(recs, self.plants, self.carries, self.config, self.settings, self.ident, self.size)
-            if blocks is None:
-                blocks, carries = b2, c2
-            else:
-                blocks, carries = _where(jnp.asarray(first), (blocks, carries), (b2, c2))
-        if self.carries is None:
-            self.carries = carries
-            self.ring = jax.tree_util.tree_map(
-                lambda b: jnp.zeros((b.shape[0], self.window.blocks) + b.shape[1:], b.dtype), blocks)
-        else:
-            self.carries = _where(jnp.asarray(ready), carries, self.carries)
-        self.ring, filled, idents, verdicts = _absorb(
-            self.ring, self.filled, blocks, jnp.asarray(ready), self.carries, self.plants, self.ident,
-            self.window, self.verdict_settings)
-        self.filled = np.array(filled)
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
+        # a segment's first chunks, then the others: each set on the whole batch or the small one
+        out = self._run(ready & ~self.started, t_end) + self._run(ready & self.started, t_end)
         self.started |= ready
         self.slice_start = np.where(ready, self.slice_start + self.size, self.slice_start)
-        return self._updates(np.flatnonzero(ready & (np.asarray(self.filled) >= self.window.blocks)),
-                             idents, verdicts, t_end)
+        return [u for _, u in sorted(out, key=lambda x: x[0])]
 
-    def _updates(self, units, idents, verdicts, t_end) -> list[Update]:
-        """The :class:`Update` of each unit in ``units``: the fields it needs are taken to the
-        host once for the group, as Python numbers (a per-unit slice of the whole estimate cost
-        about 0.1 ms per unit, a tenth of a second per frame at a thousand units)."""
+    def _run(self, ready, t_end) -> list[tuple[int, Update]]:
+        """The chunks of the units ``ready`` (all of them a segment's first chunk, or none): their
+        blocks into their rings, their estimates; (unit, update) of those whose window is full."""
+        units = np.flatnonzero(ready)
         if units.size == 0:
             return []
-        h, h_ci, d, d_ci, samples, codes, bits = (np.asarray(x)[units].tolist() for x in (
+        first = not self.started[units[0]]
+        whole = not (self.small and units.size <= self.small)
+        rows = np.arange(self.u) if whole else np.resize(units, self.small)   # the batch's units
+        plants, q_disc = (self.plants, self.q_disc) if whole else _take((self.plants, self.q_disc), rows)
+        if first:
+            recs = self._batch(rows, ready[rows], self.span + self.start)
+            blocks, carries = _first(recs, plants, q_disc, self.config, self.settings, self.ident, self.size,
+                                     self.start)
+        else:
+            recs = self._batch(rows, ready[rows], self.span)
+            blocks, carries = _next(recs, plants, q_disc, self.carries if whole else _take(self.carries, rows),
+                                    self.config, self.settings, self.ident, self.size)
+        if self.carries is None:     # every row from the first ready unit's until its own chunk
+            self.carries, self.ring = _take((carries, _empty_ring(blocks, self.window.blocks)),
+                                            np.arange(self.u) if whole else np.zeros(self.u, np.int64))
+        if whole:
+            self.carries = _where(jnp.asarray(ready), carries, self.carries)
+            self.ring, filled, idents, verdicts = _absorb(
+                self.ring, self.filled, blocks, jnp.asarray(ready), self.carries, self.plants, self.ident,
+                self.window, self.verdict_settings)
+            self.filled = np.array(filled)
+            pos = units
+        else:     # every row is ready
+            ring, filled, idents, verdicts = _absorb(
+                _take(self.ring, rows), self.filled[rows], blocks, jnp.ones(rows.size, bool), carries, plants,
+                self.ident, self.window, self.verdict_settings)
+            self.carries, self.ring = _put((self.carries, self.ring), rows, (carries, ring))
+            self.filled[rows] = np.asarray(filled)
+            pos = np.arange(units.size)      # np.resize put the ready units first
+        done = self.filled[units] >= self.window.blocks
+        return list(zip(units[done].tolist(), self._updates(units[done], pos[done], idents, verdicts, t_end)))
+
+    def _updates(self, units, pos, idents, verdicts, t_end) -> list[Update]:
+        """The :class:`Update` of each unit in ``units``, whose estimate is row ``pos`` of
+        ``idents`` and ``verdicts``: the fields it needs are taken to the host once for the
+        group, as Python numbers (a per-unit slice of the whole estimate cost about 0.1 ms per
+        unit, a tenth of a second per frame at a thousand units)."""
+        if units.size == 0:
+            return []
+        h, h_ci, d, d_ci, samples, codes, bits = (np.asarray(x)[pos].tolist() for x in (
             idents.h_s, idents.h_ci95, idents.d_pu_s, idents.d_ci95, idents.samples, verdicts.code,
             verdicts.reasons))
         words = {}
@@ -349,6 +408,23 @@ class OnlineGroup:
                 last_h_s=self.last_h[u], segment=int(self.segment[u]), window_s=self.window.window_s,
                 samples=int(samples[k])))
         return out
+
+
+def _empty_ring(blocks, n):
+    """A ring of ``n`` empty blocks per unit, shaped after ``blocks`` [U, ...]."""
+    return jax.tree_util.tree_map(lambda b: jnp.zeros((b.shape[0], n) + b.shape[1:], b.dtype), blocks)
+
+
+@jax.jit
+def _take(tree, rows):
+    """Rows ``rows`` of every leaf (leading axis: units)."""
+    return jax.tree_util.tree_map(lambda x: x[rows], tree)
+
+
+@jax.jit
+def _put(tree, rows, values):
+    """``tree`` with its rows ``rows`` set to ``values`` (a row given twice: the same values)."""
+    return jax.tree_util.tree_map(lambda x, v: x.at[rows].set(v), tree, values)
 
 
 @jax.jit
