@@ -31,7 +31,9 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   the main thread's processing time per frame against the frame period, and the delay from a
   frame's timestamp to its estimate (median, 99th percentile, largest). A run keeps up when
   its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``; the last frames, flushed
-  when the monitor stops, are not counted).
+  when the monitor stops, are not counted);
+* ``interconnection``: the 5,016-unit row of ``capacity`` alone (6 pmu-sim servers and the
+  monitor share the machine's cores).
 
 Writes results.json, results.md and live_view.png (the live view during the ``osl`` part, by
 headless Chromium where it is installed) beside this file.
@@ -47,6 +49,7 @@ import re
 import resource
 import shutil
 import subprocess
+import tempfile
 import sys
 import threading
 import time
@@ -94,14 +97,29 @@ RESTARTING = (
 
 def serve(fleet: Path, *args: str) -> tuple[subprocess.Popen, int]:
     """``jaxdse pmu-sim FLEET --port 0 ARGS``; returns the process and its port."""
+    # stderr to a file, never a pipe that nobody reads: a full pipe would stop the server
+    err = tempfile.TemporaryFile("w+")
     proc = subprocess.Popen([JAXDSE, "pmu-sim", str(fleet), "--port", "0", *args], stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=err, text=True)
     line = proc.stdout.readline()
     m = re.search(r":(\d+) ", line)
     if not m:
         proc.kill()
-        raise RuntimeError(f"pmu-sim did not start: {line}{proc.stderr.read()}")
+        err.seek(0)
+        raise RuntimeError(f"pmu-sim did not start: {line}{err.read()}")
     return proc, int(m.group(1))
+
+
+def stop(procs):
+    """Terminate the servers; one that has not ended 60 s later is killed."""
+    for proc in procs:
+        proc.terminate()
+    for proc in procs:
+        try:
+            proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 def monitor(fleet: Path, port: int, out: Path, seconds: float, window_s: float, tile: int = 1,
@@ -146,8 +164,7 @@ def run_part(fleet, out, seconds, window_s, *sim_args, tile=1, screenshot_at=Non
     try:
         return monitor(fleet, port, out, seconds, window_s, tile, screenshot_at)
     finally:
-        proc.terminate()
-        proc.wait(timeout=30)
+        stop([proc])
 
 
 def against_batch(updates, batch: dict) -> dict:
@@ -355,8 +372,7 @@ def part_capacity(work):
                                    console=lambda x: None).run(seconds + 3.0)
                     wall = time.perf_counter() - t
                 finally:
-                    proc.terminate()
-                    proc.wait(timeout=30)
+                    stop([proc])
             rows.append(_capacity_row(s, rate, n, 1, wall))
     rows.append(_capacity_interconnection(work))
     return {"rows": rows, "seconds": CAPACITY_S, "keep_up_delay_s": KEEP_UP_DELAY_S}
@@ -430,10 +446,7 @@ def _capacity_interconnection(work) -> dict:
                            console=lambda x: None).run(seconds + 3.0)
             wall, cpu = time.perf_counter() - t, time.process_time() - c0
         finally:
-            for proc in procs:
-                proc.terminate()
-            for proc in procs:
-                proc.wait(timeout=30)
+            stop(procs)
     return _capacity_row(s, 30, 22 * tile, streams, wall, cpu)
 
 
@@ -459,7 +472,8 @@ def part_speed(work):
 
 
 PARTS = {"osl": part_osl, "speed": part_speed, "npcc": part_npcc, "ambient": part_ambient, "faults": part_faults,
-         "capacity": part_capacity}
+         "capacity": part_capacity,
+         "interconnection": lambda work: {"rows": [_capacity_interconnection(work)], "seconds": CAPACITY_S}}
 
 
 def main():
@@ -560,24 +574,31 @@ def report(doc) -> str:
                          f"{_f(d.get('p99'), '.3f')} | {_f(w.get('median'), '.3f')} |")
         lines += ["", f"Difference between the speeds: median {sp['difference_s']['median']:.3f} s, 99 % "
                   f"{sp['difference_s']['p99']:.3f} s; every delay positive: {sp['positive']}.", ""]
-    c = doc.get("capacity")
-    if c:
-        lines += [f"## Latency and capacity ({c['seconds']:g} s each, real time, window 30 s)", "",
-                  "| frames/s | units | streams | frame period [ms] | processing per frame median / 99 % [ms] | "
-                  "CPU per frame median / 99 % [ms] | busy fraction | delay median / 99 % / max [s] | "
-                  "area estimate delay median / 99 % [s] | peak memory [MiB] | keeps up |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for r in c["rows"]:
-            p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
-            cpu, e = r.get("processing_cpu_ms_per_frame") or {}, r.get("inertia_delay_s") or {}
-            lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r['frame_period_ms']:.1f} | "
-                         f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(cpu.get('median'))} / {_f(cpu.get('p99'))} | "
-                         f"{_f(r['busy_fraction'], '.2f')} | "
-                         f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | "
-                         f"{_f(e.get('median'))} / {_f(e.get('p99'))} | {_f(r.get('peak_rss_mib'), '.0f')} | "
-                         f"{r['keeps_up']} |")
-        lines.append("")
+    for key, title in (("capacity", "Latency and capacity"),
+                       ("interconnection", "A whole interconnection (`--only interconnection`)")):
+        c = doc.get(key)
+        if c:
+            lines += _capacity_table(c, title)
     return "\n".join(lines)
+
+
+def _capacity_table(c, title) -> list[str]:
+    lines = [f"## {title} ({c['seconds']:g} s each, real time, window 30 s)", "",
+             "| frames/s | units | streams | frame period [ms] | processing per frame median / 99 % [ms] | "
+             "CPU per frame median / 99 % [ms] | busy fraction | delay median / 99 % / max [s] | "
+             "area estimate delay median / 99 % [s] | peak memory [MiB] | keeps up |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in c["rows"]:
+        p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
+        cpu, e = r.get("processing_cpu_ms_per_frame") or {}, r.get("inertia_delay_s") or {}
+        lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r['frame_period_ms']:.1f} | "
+                     f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(cpu.get('median'))} / {_f(cpu.get('p99'))} | "
+                     f"{_f(r['busy_fraction'], '.2f')} | "
+                     f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | "
+                     f"{_f(e.get('median'))} / {_f(e.get('p99'))} | {_f(r.get('peak_rss_mib'), '.0f')} | "
+                     f"{r['keeps_up']} |")
+    lines.append("")
+    return lines
 
 
 if __name__ == "__main__":

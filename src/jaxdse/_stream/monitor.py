@@ -68,6 +68,9 @@ PROGRESS_S = 5.0
 READY_S = 600.0
 """A reader waits at most this long [s] for the main thread to take a stream's configuration
 (and compile the estimators) before it turns data on."""
+GATE_S = 60.0
+"""With several streams, a stream whose estimators are ready waits at most this long [s] for the
+others' before it turns data on (:class:`_StartGate`)."""
 QUEUE_SIZE = 100_000
 """Items (frames, counts, connection events) waiting for the main thread."""
 
@@ -247,15 +250,44 @@ def tiled(runs: list, copies: int) -> list:
 
 # --- the connections -------------------------------------------------------------------------
 
+class _StartGate:
+    """When a stream's reader turns data on: once its own estimators are compiled and every
+    stream's are (the main thread compiles one stream's programs after another; frames of a
+    stream already on would queue behind the next one's compile: 32-41 s at 6 streams of 836
+    units), or ``GATE_S`` after its own. A reconnection finds both set and starts at once."""
+
+    def __init__(self, own: threading.Event, every: threading.Event, k: int, log):
+        self.own, self.every, self.k, self.log = own, every, k, log
+        self.since = None
+
+    def wait(self, timeout: float) -> bool:
+        if not self.own.wait(timeout):
+            return False
+        if self.every.is_set():
+            return True
+        if self.since is None:
+            self.since = time.monotonic()
+        if self.every.wait(timeout):
+            return True
+        if time.monotonic() - self.since > GATE_S:
+            self.log(f"stream {self.k}: data turned on {GATE_S:g} s after its estimators were ready, "
+                     "without waiting longer for the other streams'")
+            self.every.set()
+            return True
+        return False
+
+
+
 def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, log,
-            ready: threading.Event | None = None):
+            ready: _StartGate | threading.Event | None = None):
     """One stream's thread: connect, ask for the configuration, read; reconnect with back-off.
 
     Puts (k, kind, x, arrival) on ``out``: "frame" (a configuration or data frame), "up",
     "down" and "refused" (text), "counts" (the decoder's counts); ``arrival``: time.monotonic()
-    when the frame's bytes came. Data is turned on once ``ready`` is set (the main thread has
-    taken the configuration and compiled the estimators: no backlog of frames behind the
-    compiler), or after ``READY_S``. Every wait ends: the connection's and each read's within
+    when the frame's bytes came. Data is turned on once ``ready.wait`` says so (the main thread has
+    taken the configuration and compiled the estimators, this stream's and, through a
+    :class:`_StartGate`, the others': no backlog of frames behind the compiler), or after
+    ``READY_S``. Every wait ends: the connection's and each read's within
     ``timeout_s``, a full queue (the main thread took nothing) within ``timeout_s`` too."""
     backoff = Backoff()
     consumer = "the monitor's main thread"
@@ -803,6 +835,7 @@ class Monitor:
         names = [u.name for u in cfg.units]
         self.streams = [_Stream(k, spec, [u for u in cfg.units if u.stream == k], names, cfg, self.est,
                                 self.out_dir, self.log) for k, spec in enumerate(cfg.streams)]
+        self.all_ready = threading.Event()   # every stream's estimators compiled (_StartGate)
         self.alarms = {}
         self.inertia_alarms = {}   # area -> E below the floor
         self.inertia_delays = []   # [s of stream time] per inertia line set, from its time to its emission
@@ -930,7 +963,8 @@ class Monitor:
         stop = threading.Event()
         threads = []
         for k, s in enumerate(self.streams):
-            target, args = _reader, (k, s.spec, q, stop, self.log, s.ready)
+            target, args = _reader, (k, s.spec, q, stop, self.log,
+                                     _StartGate(s.ready, self.all_ready, k, self.log))
             if s.spec.protocol == "sttp":
                 from .sttp import reader as target
 
@@ -990,6 +1024,8 @@ class Monitor:
             if isinstance(x, c3.ConfigFrame):
                 self.emit(s.on_config(x), s)
                 s.ready.set()
+                if all(t.ready.is_set() for t in self.streams):
+                    self.all_ready.set()
             else:
                 if s.config is not None:
                     s.clock.frame(c3.frame_time(x, s.config.time_base), arrival)
