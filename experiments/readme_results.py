@@ -52,6 +52,21 @@ def block() -> str:
             f"`identified` with an interval that misses the truth: {w['identified_interval_misses']}. Without "
             f"the inverter plant: {100 * c['within_2pct']:.0f} %, {100 * c['line_trip_within_2pct']:.0f} %, "
             f"{100 * c['within_5pct']:.0f} % of {c['recordings']}.")
+    iv = [load(f"experiments/andes_ibr_validate/{f}.json")
+          for f in ("results_andes_ibr", "results", "results_model_error_0.02")]
+    if all(iv):
+        def planted(doc):
+            return "; ".join(f"{r['model']} {r['parameter']} x{r['factor']:g}: {r['calibrated_value']:.4g} against "
+                             f"{r['truth']:.4g} ({r['error_percent']:+.2f} %, truth in the interval: "
+                             f"{'yes' if r['truth_in_ci'] else 'no'}, other parameters changed: "
+                             f"{', '.join(r['unplanted_changed']) or 'none'})" for r in doc["planted"])
+        out.append(
+            "- **`jaxdse validate` on inverter-based plants** (`experiments/andes_ibr_validate/results*.md`, "
+            "`python experiments/andes_ibr_validate/run.py [andes_ibr] [--model-error=0.02]`): the true records "
+            f"pass on {100 * iv[0]['pass_rate']:.0f} % (REPCA1 off) and {100 * iv[1]['pass_rate']:.0f} % "
+            f"(REPCA1 on) of the recordings. Planted errors, REPCA1 off: {planted(iv[0])}. REPCA1 on, the "
+            f"default model error: {planted(iv[1])}. With `model_error` {iv[2]['model_error']:g}: "
+            f"{planted(iv[2])}.")
     pb = load("experiments/andes_bench/playback.json")
     if pb:
         s = pb["summary"]
