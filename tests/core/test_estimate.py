@@ -42,7 +42,7 @@ def test_offline_generator_is_flagged(ambient, plant, estimate_jit):
     rec = ambient.recording
     rec = jd.Recording(t_s=rec.t_s, v_mag_pu=rec.v_mag_pu, v_ang_rad=rec.v_ang_rad,
                        i_mag_pu=jnp.zeros_like(rec.i_mag_pu), i_ang_rad=jnp.zeros_like(rec.t_s),
-                       f_hz=rec.f_hz, location="terminal")
+                       f_hz=rec.f_hz, location=rec.location)   # test_angle_offset_invariance's program
     est = estimate_jit(rec, plant, jd.ObserverConfig())
     assert _finite(est) and not bool(est.online) and not bool(est.converged)
 

@@ -421,7 +421,20 @@ def _batch_jit():
     return _BATCH[0]
 
 
+def _mapped(units, lanes, run: _Run) -> _Result:
+    """:func:`_one` over the leading axis, one unit after another (``lax.map``): for Kvaerno5,
+    whose nested Newton loops cost twice the tracing when batched, and whose adaptive steps are
+    each unit's own."""
+    dyn, static = eqx.partition((units, lanes), eqx.is_array)
+    return jax.lax.map(lambda d: _one(*eqx.combine(d, static), run), dyn)
+
+
+_MAPPED = eqx.filter_jit(_mapped)
+
+
 def _batch(units, lanes, run):
+    if run.solver == "kvaerno5":
+        return _MAPPED(units, lanes, run)
     return _batch_jit()(units, lanes, run)
 
 
@@ -674,7 +687,8 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                 check_ibr.at(r, n + j), check_ibr.at(r, 2 * n + j))))
         else:
             lanes = [_lane(raw, gens[k], x) for x in (0.0, spec.step) for k in members]
-            fn, split = _batch_jit(), (lambda r, j: (_at(r, j), _at(r, n + j)))
+            fn = _MAPPED if how.solver == "kvaerno5" else _batch_jit()
+            split = lambda r, j: (_at(r, j), _at(r, n + j))  # noqa: E731
         args = (_stack(units * (len(lanes) // n)), _stack(lanes), how)
         compiled = fn.lower(*args).compile()
         executing()   # the group's run limit counts from here

@@ -182,8 +182,14 @@ class _Played(NamedTuple):
 
 
 def _batch(units, series, settings):
-    """The units' playbacks, vmapped (one program per structure and length; :mod:`programs`)."""
-    r = eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
+    """The units' playbacks (one program per structure and length; :mod:`programs`): vmapped,
+    or with Kvaerno5 one unit after another (``lax.map``: each takes its own adaptive steps, and
+    batching its nested Newton loops would double the tracing)."""
+    if settings.solver == "kvaerno5":
+        dyn, static = eqx.partition((units, series), eqx.is_array)
+        r = jax.lax.map(lambda d: play_back(*eqx.combine(d, static), settings), dyn)
+    else:
+        r = eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
     return r.p_pu, r.q_pu, r.omega_pu, r.ok
 
 

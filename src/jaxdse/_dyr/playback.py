@@ -232,8 +232,8 @@ def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> Terminal
     return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
 
 
-def play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
-              settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
+def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
+               settings: PlaybackSettings = PlaybackSettings()) -> PlaybackResult:
     """Simulate ``unit`` (a machine's :class:`DyrUnit`, an inverter-based plant's
     :class:`IbrUnit` or a grid-forming converter's :class:`GfmUnit`) with the
     recorded terminal voltage imposed (PLBVFU1 convention); the frequency deviation an
@@ -302,6 +302,11 @@ def play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
     m = unit.machine.n_states
     return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=ys[:, m - 1], delta_rad=ys[:, m - 2],
                           efd_pu=efd, tm_pu=tm, references=refs, ok=ok)
+
+
+play_back = eqx.filter_jit(_play_back)
+"""Jitted: called inside another program (each of a calibration's programs calls it), it is
+traced once for them all."""
 
 
 __all__ = ["PlaybackResult", "PlaybackSettings", "TerminalSeries", "initial_operating_point",
