@@ -1,25 +1,29 @@
-"""Scale on a real case (issue 33): every synchronous unit of ACTIVSg2000, ``jaxdse fleet``
-with the .dyr playback, end to end.
+"""Scale on a real case (issues 33, 44): every in-service unit of ACTIVSg2000 (or of another
+case: the Texas 7k case's synchronous and inverter-based plants), ``jaxdse fleet`` with the
+.dyr playback, end to end.
 
     python benchmarks/real_case_fleet.py                 # every unit (about 5 minutes on 2 cores)
     python benchmarks/real_case_fleet.py --units 26      # a quick run: 2 units of each chain
     python benchmarks/real_case_fleet.py --no-write      # measure, leave results.json alone
     jaxdse check experiments/activsg2000/case.toml --repair --out rep/
     python benchmarks/real_case_fleet.py --raw rep/repaired.raw --dyr rep/repaired.dyr  # repaired
+    python benchmarks/real_case_fleet.py --texas7k       # the Texas 7k case, inverter plants too
 
 1. Read ACTIVSg2000 (``../shared/data/activsg2000``, or ``--case DIR``; ``--dyr FILE`` and
    ``--raw FILE``: another .dyr and .raw, e.g. the ``repaired.dyr`` and ``repaired.raw`` of
    ``jaxdse check --repair``) with ``jd.read_raw`` /
-   ``jd.read_dyr``; every in-service generator with a machine record is a synchronous unit.
-   ``jd.unit_model`` builds its model from its own records; a unit whose model cannot be built
+   ``jd.read_dyr``; every in-service generator with a machine record is a synchronous unit,
+   one with a converter record (REGCA1, REGCB1) an inverter-based plant. ``jd.unit_model`` (or
+   ``jd.ibr_model``) builds its model from its own records; a unit whose model cannot be built
    (a model not simulated, a data problem) is listed with the reason and left out, as ``jaxdse
    check`` does; so is a unit that does not hold its power-flow P and Q (within
    ``FLAT_TOL_PU``) over the recording's undisturbed first seconds (check's held-voltage run).
-   Generators without any record (the case's wind and solar plants) are counted apart.
+   Generators without any record (ACTIVSg2000's wind and solar plants) are counted apart.
 2. A 70 s event recording per unit at ``--fps`` frames/s (30: a common PMU reporting rate): a
    terminal-voltage disturbance drawn per unit from a seed, played into the unit's own model
    (``jd.play_back``, adaptive Tsit5 at rtol 1e-9: tighter than the fleet's 1e-7) from the .raw power flow at
-   its terminal, vmapped per model chain. Two kinds (3 in 5 the first):
+   its terminal, vmapped per model chain (an inverter-based plant sees the angle's slope as
+   its frequency deviation). Two kinds (3 in 5 the first):
    * a nearby fault cleared after 3-6 cycles: |V| dips to 25-75 % with an angle jump, then the
      post-fault network (a line out): a step of |V| (-3 to +0.5 %) and of the angle (2-10 deg
      either way) with an electromechanical swing (0.6-1.8 Hz, damping ratio 5-15 %, 2-8 deg);
@@ -69,12 +73,15 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 CASE = ROOT.parent / "shared" / "data" / "activsg2000"
 RAW, DYR = "ACTIVSg2000.RAW", "ACTIVSg2000_dynamics.dyr"
+TEXAS7K = ROOT.parent / "shared" / "data" / "texas7k"
+TEXAS7K_RAW, TEXAS7K_DYR = "Texas7k_20210309.raw", "Texas7k_20210309_Dynamics.dyr"
 TVE_PERCENT = 0.05
 EVENT_S = 70.0
 PLAYBACK_FN, ASSESS_FN = "_batch", "_assess_vmapped"
-EXPORTED = {"call_exported": PLAYBACK_FN}
+EXPORTED = {"call_exported": PLAYBACK_FN, "call": PLAYBACK_FN}
 """The playback's programs are exported (``_many/programs.py``): traced as ``_batch`` where the
-cache holds none yet, compiled under the name of the exported program's call."""
+cache holds none yet, compiled under the name of the exported program's call (``call`` in JAX
+0.10: there the count includes the initial-state programs, ``_starts``)."""
 SMALL_COMPILE_S = 0.1
 FLAT_TOL_PU = 1e-4
 """Largest |P - P0|, |Q - Q0| before the event [pu of MBASE]: a unit beyond it is left out."""
@@ -155,7 +162,8 @@ def run_fleet(fleet_file: Path, out_dir: Path, cache_dir: str) -> dict:
 # --- the recordings ---------------------------------------------------------------------------
 
 def case_units(raw, dyr, jd):
-    """(built [(gen, UnitModel)], left out [{name, bus, id, models, reasons}], no records count)."""
+    """(built [(gen, UnitModel or IbrModel)], left out [{name, bus, id, category, models,
+    reasons}], no records count)."""
     built, left, bare = [], [], 0
     seen = set()
     for g in raw.generators:
@@ -164,15 +172,23 @@ def case_units(raw, dyr, jd):
             continue
         seen.add(key)
         um = jd.unit_model(dyr, raw, g.bus, g.id)
+        category = "synchronous"
         if "machine" not in um.models:
-            bare += 1                               # no machine record: not a synchronous unit
-            continue
+            um = jd.ibr_model(dyr, g.bus, g.id, raw)
+            category = "inverter-based"
+            if "converter" not in um.models:
+                bare += 1                           # no machine or converter record
+                continue
         if um.unit is None:
             left.append({"name": f"B{g.bus}_G{g.id.strip()}", "bus": g.bus, "id": g.id.strip(),
-                         "models": um.models, "reasons": list(um.missing)})
+                         "category": category, "models": um.models, "reasons": list(um.missing)})
             continue
         built.append((g, um))
     return built, left, bare
+
+
+def is_ibr_model(um) -> bool:
+    return "converter" in um.models
 
 
 def choose(built, n: int | None):
@@ -260,16 +276,19 @@ def make_recordings(chosen, raw, fps: float, seed: int, jd):
         info.append(ev)
     gen = eqx.filter_jit(eqx.filter_vmap(jd.play_back, in_axes=(0, 0, None)))
     settings = jd.PlaybackSettings(rtol=1e-9, atol=1e-11)
-    groups = defaultdict(list)
+    groups = defaultdict(list)   # one call per model chain and pytree structure (an IBR's flags)
     for k, (_, um) in enumerate(chosen):
-        groups[um.structure].append(k)
-    results, timing = {}, {}
-    for chain, idx in groups.items():
+        groups[(um.structure, jax.tree_util.tree_structure(um.unit))].append(k)
+    results, timing = {}, defaultdict(lambda: {"units": 0, "calls": 0, "wall_s": 0.0})
+    for (chain, _), idx in groups.items():
         t0 = time.perf_counter()
         units = jax.tree.map(lambda *x: jnp.stack(x), *[chosen[k][1].unit for k in idx])
         ser = jax.tree.map(lambda *x: jnp.stack(x), *[series[k] for k in idx])
         res = jax.device_get(gen(units, ser, settings))
-        timing["/".join(chain)] = {"units": len(idx), "wall_s": round(time.perf_counter() - t0, 2)}
+        tm = timing["/".join(chain)]
+        tm["units"] += len(idx)
+        tm["calls"] += 1
+        tm["wall_s"] = round(tm["wall_s"] + time.perf_counter() - t0, 2)
         for j, k in enumerate(idx):
             results[k] = (np.asarray(res.p_pu[j]), np.asarray(res.q_pu[j]), bool(res.ok[j]))
     cols, failed = {"time_s": t}, []
@@ -277,7 +296,8 @@ def make_recordings(chosen, raw, fps: float, seed: int, jd):
         p, q, ok = results[k]
         tag = f"B{g.bus}_G{g.id.strip()}"
         if not (ok and np.all(np.isfinite(p)) and np.all(np.isfinite(q))):
-            failed.append({"name": tag, "reason": "the generating playback did not reach the end"})
+            failed.append({"name": tag, "models": um.models,
+                           "reason": "the generating playback did not reach the end"})
             continue
         # The no-disturbance screen (as `jaxdse check`'s held-voltage run): before the event the
         # unit must hold its power-flow P and Q.
@@ -299,10 +319,10 @@ def make_recordings(chosen, raw, fps: float, seed: int, jd):
         cols[f"{tag}/IM"] = np.abs(i)
         cols[f"{tag}/IA"] = np.rad2deg(np.angle(i))
         info[k]["name"] = tag
-    return cols, [i for k, i in enumerate(info) if "name" in i], failed, timing
+    return cols, [i for k, i in enumerate(info) if "name" in i], failed, dict(timing)
 
 
-FLEET_TOML = """# written by benchmarks/real_case_fleet.py: ACTIVSg2000, one 70 s event per unit
+FLEET_TOML = """# written by benchmarks/real_case_fleet.py: {name}, one 70 s event per unit
 [case]
 raw = {raw!r}
 dyr = {dyr!r}
@@ -329,6 +349,22 @@ figures = false
 """
 
 
+def by_category(units: list, np) -> dict:
+    """Per category (synchronous, inverter-based): units, played back on their own records,
+    validation results, median RMS error of P and Q [% of MBASE]."""
+    out = {}
+    for cat in ("synchronous", "inverter-based"):
+        us = [u for u in units if (u.get("plant_type") == "inverter-based") == (cat == "inverter-based")]
+        own = [u for u in us if u["validation"]["model"] == "dyr"]
+        out[cat] = {"units": len(us), "played_back_with_own_records": len(own),
+                    "validation": dict(Counter(u["validation"]["result"] for u in us)),
+                    "median_rms_percent_mbase": {
+                        k: float(np.median([u["playback_rms_percent_mbase"][k] for u in own
+                                            if u["playback_rms_percent_mbase"][k] is not None] or [np.nan]))
+                        for k in ("P_t", "Q_t")}}
+    return out
+
+
 # --- main ---------------------------------------------------------------------------------------
 
 def main() -> None:
@@ -343,6 +379,8 @@ def main() -> None:
                     help="a .raw to use instead of the case's (e.g. repaired.raw of `jaxdse check --repair`)")
     ap.add_argument("--key", default=None, help="results.json key (default: real_case_fleet, with --dyr "
                     "real_case_fleet_repaired)")
+    ap.add_argument("--texas7k", action="store_true", help="the Texas 7k case (../shared/data/texas7k): its "
+                    "synchronous and inverter-based plants; results key real_case_fleet_texas7k")
     ap.add_argument("--keep", type=Path, default=None, help="keep the recordings and reports here")
     ap.add_argument("--no-write", action="store_true", help="leave benchmarks/results.json alone")
     args = ap.parse_args()
@@ -356,8 +394,12 @@ def main() -> None:
 
     import jaxdse as jd
 
-    dyr_file = args.dyr or args.case / DYR
-    raw_file = args.raw or args.case / RAW
+    if args.texas7k:
+        name = "Texas 7k (Texas A&M synthetic, 2021-03-09, rev 33 .raw + .dyr)"
+        dyr_file, raw_file = args.dyr or TEXAS7K / TEXAS7K_DYR, args.raw or TEXAS7K / TEXAS7K_RAW
+    else:
+        name = "ACTIVSg2000 (rev 33 .raw + .dyr)"
+        dyr_file, raw_file = args.dyr or args.case / DYR, args.raw or args.case / RAW
     raw = jd.read_raw(raw_file, strict=False)
     dyr = jd.read_dyr(dyr_file, strict=False)
     repaired = sorted({f"B{r.bus}_G{r.id}" for r in dyr.records if r.changes}
@@ -365,8 +407,10 @@ def main() -> None:
     built, left, bare = case_units(raw, dyr, jd)
     chosen = choose(built, args.units)
     chains = Counter("/".join(b[1].structure) for b in chosen)
-    print(f"{len(built) + len(left)} synchronous units ({len(left)} left out), {bare} generators "
-          f"without records; running {len(chosen)} units of {len(chains)} chains", flush=True)
+    n_ibr = sum(is_ibr_model(um) for _, um in built) + sum(x["category"] == "inverter-based" for x in left)
+    print(f"{len(built) + len(left) - n_ibr} synchronous units and {n_ibr} inverter-based plants "
+          f"({len(left)} left out), {bare} generators without records; running {len(chosen)} units of "
+          f"{len(chains)} chains", flush=True)
     for x in left:
         print(f"  left out: {x['name']}: {'; '.join(x['reasons'])}")
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix="jaxdse_real_case_"))
@@ -375,7 +419,7 @@ def main() -> None:
     cols, events, failed, gen_timing = make_recordings(chosen, raw, args.fps, args.seed, jd)
     gen_s = time.perf_counter() - t0
     pd.DataFrame(cols).to_csv(work / "events.csv", index=False, float_format="%.8g")
-    (work / "fleet.toml").write_text(FLEET_TOML.format(
+    (work / "fleet.toml").write_text(FLEET_TOML.format(name=name.split(" (")[0],
         raw=str(Path(raw_file).resolve()), dyr=str(dyr_file.resolve()), sbase=raw.sbase_mva))
     print(f"recordings: {len(events)} units in {gen_s:.1f} s ({len(failed)} failed), "
           f"{(work / 'events.csv').stat().st_size / 1e6:.0f} MB CSV in {work}", flush=True)
@@ -397,11 +441,13 @@ def main() -> None:
     cs_cold, cs_warm = (compile_summary(r["stats"]["durations"]) for r in (cold, warm))
     chain_names = sorted(chains)
     result = {
-        "command": "python benchmarks/real_case_fleet.py" + (f" --units {args.units}" if args.units else "")
+        "command": "python benchmarks/real_case_fleet.py" + (" --texas7k" if args.texas7k else "")
+                   + (f" --units {args.units}" if args.units else "")
                    + (f" --raw {args.raw}" if args.raw else "") + (f" --dyr {args.dyr}" if args.dyr else ""),
-        "case": "ACTIVSg2000 (rev 33 .raw + .dyr)" + (f", .raw {Path(raw_file).name}" if args.raw else "")
+        "case": name + (f", .raw {Path(raw_file).name}" if args.raw else "")
                 + (f", .dyr {dyr_file.name}" if args.dyr else ""),
-        "synchronous_units": len(built) + len(left),
+        "synchronous_units": len(built) + len(left) - n_ibr,
+        "inverter_based_plants": n_ibr,
         "units_on_repaired_records": len(repaired),
         "units_on_repaired_records_run": sum(f"B{g.bus}_G{g.id.strip()}" in repaired for g, _ in chosen),
         "units_left_out": left,
@@ -420,13 +466,14 @@ def main() -> None:
         "programs": {"playback": cs_cold.get(PLAYBACK_FN, {}).get("programs", 0),
                      "assessment": cs_cold.get(ASSESS_FN, {}).get("programs", 0)},
         "per_unit_s": {"cold": round(cold["wall_s"] / n, 3), "warm": round(warm["wall_s"] / n, 3)},
-        "goal_s": {"cold": 180, "warm": 90},
+        "goal_s": {"cold": 300, "warm": 150} if args.texas7k else {"cold": 180, "warm": 90},
         "validation": doc["summary"]["validation"], "verdicts": doc["summary"]["verdicts"],
         "median_rms_percent_mbase": {
             k: float(np.median([u["playback_rms_percent_mbase"][k] for u in units
                                 if u["validation"]["model"] == "dyr"
                                 and u["playback_rms_percent_mbase"][k] is not None] or [np.nan]))
             for k in ("P_t", "Q_t")},
+        "by_category": by_category(units, np),
         "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores",
         "load_average_at_start": [round(x, 2) for x in load],
         "jax": jax.__version__,
@@ -436,7 +483,8 @@ def main() -> None:
     if not args.no_write:
         path = HERE / "results.json"
         doc = json.loads(path.read_text()) if path.exists() else {}
-        doc[args.key or ("real_case_fleet_repaired" if args.dyr or args.raw else "real_case_fleet")] = result
+        doc[args.key or ("real_case_fleet_texas7k" if args.texas7k else "real_case_fleet_repaired"
+                     if args.dyr or args.raw else "real_case_fleet")] = result
         path.write_text(json.dumps(doc, indent=2) + "\n")
 
 

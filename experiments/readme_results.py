@@ -290,6 +290,27 @@ def block() -> str:
                 f"{rr['validation'].get('fail', 0)} (median RMS error of P "
                 f"{rr['median_rms_percent_mbase']['P_t']:.2f} %, Q {rr['median_rms_percent_mbase']['Q_t']:.2f} "
                 f"% of MBASE); {rr['cold']['wall_s']:.0f} s cold, {rr['warm']['wall_s']:.0f} s warm.")
+        rt = tb.get("real_case_fleet_texas7k")
+        if rt:
+            cats = rt["by_category"]
+            sy, ib = cats["synchronous"], cats["inverter-based"]
+
+            def verdicts(c):
+                return ", ".join(f"{k} {v}" for k, v in sorted(c["validation"].items()))
+            out.append(
+                f"- **Texas 7k end to end, inverter-based plants included** (`{rt['command']}`, load average "
+                f"{rt['load_average_at_start'][0]:.1f} at the start): {rt['synchronous_units']} synchronous "
+                f"units and {rt['inverter_based_plants']} inverter-based plants in service, "
+                f"{len(rt['units_left_out'])} not simulated, {len(rt['units_not_flat_or_failed'])} not holding "
+                f"their power flow or not played to the end when the recordings were made, "
+                f"{len(rt.get('fleet_skipped', []))} skipped by the fleet; {rt['units_run']} run through "
+                f"`jaxdse fleet`, each with its own records and a {rt['recording']['event_s']:.0f} s event: "
+                f"{rt['cold']['wall_s']:.0f} s cold, {rt['warm']['wall_s']:.0f} s warm (goal "
+                f"{rt['goal_s']['cold']} and {rt['goal_s']['warm']} s). Synchronous: {sy['units']} units, "
+                f"{verdicts(sy)} (median RMS error of P {sy['median_rms_percent_mbase']['P_t']:.2f} %, Q "
+                f"{sy['median_rms_percent_mbase']['Q_t']:.2f} % of MBASE); inverter-based: {ib['units']} plants, "
+                f"{verdicts(ib)} (P {ib['median_rms_percent_mbase']['P_t']:.2f} %, Q "
+                f"{ib['median_rms_percent_mbase']['Q_t']:.2f} %).")
         cs = tb.get("check_stress")
         if cs:
             parts = []

@@ -84,7 +84,9 @@ from ._dyr.playback import PlaybackResult as PlaybackResult
 from ._dyr.playback import PlaybackSettings as PlaybackSettings
 from ._dyr.playback import TerminalSeries as TerminalSeries
 from ._dyr.playback import play_back as play_back
+from ._dyr.records import IbrModel as IbrModel
 from ._dyr.records import UnitModel as UnitModel
+from ._dyr.records import ibr_model as ibr_model
 from ._dyr.records import unit_model as unit_model
 from ._dyr.unit import DyrUnit as DyrUnit
 from ._io.config import GeneratorRun as GeneratorRun
