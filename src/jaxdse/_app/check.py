@@ -432,12 +432,6 @@ def _mapped(units, lanes, run: _Run) -> _Result:
 _MAPPED = eqx.filter_jit(_mapped)
 
 
-def _batch(units, lanes, run):
-    if run.solver == "kvaerno5":
-        return _MAPPED(units, lanes, run)
-    return _batch_jit()(units, lanes, run)
-
-
 def _stack(trees):
     return jax.tree.map(lambda *x: jnp.stack(x), *trees)
 
