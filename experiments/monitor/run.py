@@ -33,7 +33,8 @@ Parts (each a ``jaxdse pmu-sim`` process, the monitor in this process through th
   its delay stays bounded (the largest within ``KEEP_UP_DELAY_S``; the last frames, flushed
   when the monitor stops, are not counted);
 * ``interconnection``: the 5,016-unit row of ``capacity`` alone (6 pmu-sim servers and the
-  monitor share the machine's cores).
+  monitor share the machine's cores), run ``INTERCONNECTION_S`` seconds: the start's backlog
+  and the delays after it, apart (``_start_and_steady``).
 
 Writes results.json, results.md and live_view.png (the live view during the ``osl`` part, by
 headless Chromium where it is installed) beside this file.
@@ -400,6 +401,36 @@ at least 14 (26 as pmu-sim serves it, polar floats), and CFG-2, about 70 bytes a
 holds at most about 930 stations."""
 
 
+INTERCONNECTION_S = 80.0
+"""The interconnection's measured run [s]: within one pass of OSL case 1's 90 s (``--loop``
+joins its end to its start, a jump at which every unit's segment restarts: a storm of first
+chunks that a live stream does not have), and long enough to see the monitor after its start.
+The start is the expensive part: each unit's first chunk processes the segment's first 30 s at
+once (T_ref, the governor's start), about 2 s per 760 units on this machine, and every unit of
+every stream reaches it in the same second."""
+STEADY_DELAY_S = 2.0
+"""The delay [s] below which the monitor has worked off its start (``_start_and_steady``)."""
+
+
+def _start_and_steady(updates: Path) -> dict:
+    """From ``updates.jsonl``: when the start's backlog was worked off (the first unit update
+    whose delay is under ``STEADY_DELAY_S``, in seconds after the first update), and the delays
+    of the unit updates from then on (median, 99 %, max) and their number; the updates
+    before it are the start's."""
+    rows = [x for x in map(json.loads, updates.read_text().splitlines()) if "unit" in x and "delay_s" in x]
+    if not rows:
+        return {}
+    t0 = rows[0]["t"]
+    k = next((j for j, x in enumerate(rows) if x["delay_s"] < STEADY_DELAY_S), None)
+    if k is None:
+        return {"backlog_worked_off_after_s": None, "updates_in_start": len(rows)}
+    d = np.array([x["delay_s"] for x in rows[k:]])
+    return {"backlog_worked_off_after_s": round(rows[k]["t"] - t0, 3), "updates_in_start": k,
+            "steady": {"updates": int(d.size), "stream_s": round(rows[-1]["t"] - rows[k]["t"], 3),
+                       "delay_s": {"median": float(np.median(d)), "p99": float(np.quantile(d, 0.99)),
+                                   "max": float(d.max())}}}
+
+
 def interconnection_toml(bases: list[str], ports: list[int], per: int) -> str:
     """The monitor file of ``_capacity_interconnection``: stream k (on ``ports[k]``) carries
     copies k per + 1 .. k per + per of the plants ``bases``, as stations of the names
@@ -432,7 +463,7 @@ def _capacity_interconnection(work) -> dict:
     cfg = out / "monitor.toml"
     cfg.write_text(f'fleet = "{OSL}"\n')
     bases = [u.name for u in jd.load_monitor(cfg).units]
-    for seconds in (WARM_UP_S, CAPACITY_S):    # the first compiles (the jit cache is the process's)
+    for seconds in (WARM_UP_S, INTERCONNECTION_S):    # the first compiles (the jit cache is the process's)
         procs = []
         try:
             ports = []
@@ -447,7 +478,8 @@ def _capacity_interconnection(work) -> dict:
             wall, cpu = time.perf_counter() - t, time.process_time() - c0
         finally:
             stop(procs)
-    return _capacity_row(s, 30, 22 * tile, streams, wall, cpu)
+    return {**_capacity_row(s, 30, 22 * tile, streams, wall, cpu), "seconds": INTERCONNECTION_S,
+            **_start_and_steady(out / "live" / "updates.jsonl")}
 
 
 EXAMPLE = ROOT / "examples" / "csv_positive_sequence.toml"
@@ -473,7 +505,7 @@ def part_speed(work):
 
 PARTS = {"osl": part_osl, "speed": part_speed, "npcc": part_npcc, "ambient": part_ambient, "faults": part_faults,
          "capacity": part_capacity,
-         "interconnection": lambda work: {"rows": [_capacity_interconnection(work)], "seconds": CAPACITY_S}}
+         "interconnection": lambda work: {"rows": [_capacity_interconnection(work)], "seconds": INTERCONNECTION_S}}
 
 
 def main():
@@ -598,6 +630,16 @@ def _capacity_table(c, title) -> list[str]:
                      f"{_f(e.get('median'))} / {_f(e.get('p99'))} | {_f(r.get('peak_rss_mib'), '.0f')} | "
                      f"{r['keeps_up']} |")
     lines.append("")
+    for r in c["rows"]:
+        if "backlog_worked_off_after_s" in r:
+            st = r.get("steady")
+            lines.append(f"{r['units']} units: the start's backlog (every unit's first chunk in the same second) "
+                         + ("was not worked off in the run" if st is None else
+                            f"was worked off {r['backlog_worked_off_after_s']:g} s after the first update "
+                            f"({r['updates_in_start']} updates before it); from then on, {st['updates']} updates "
+                            f"over {st['stream_s']:g} s: delay median {_f(st['delay_s']['median'])} s, 99 % "
+                            f"{_f(st['delay_s']['p99'])} s, max {_f(st['delay_s']['max'])} s") + ".")
+            lines.append("")
     return lines
 
 

@@ -631,8 +631,14 @@ class PmuServer:
         """Frame ``k`` of the recording at grid ``index``: its bytes (None: dropped) and the delay
         [s] a late-frame fault gives it; ``cfg_bit``: STAT bit 10 (a configuration change comes)."""
         half = 0.5 / self.source.rate
-        rec = self.records[self.config_now][k:k + 1].copy()
         tq, delay, bad_crc = 0, 0.0, False
+        if not cfg_bit and not any(f.covers(t_stream, half) for f in self.faults):
+            # the recorded bytes as they are: a structured record's copy and tobytes() go field by
+            # field (5 per station: 5 ms a frame at 836 stations, most of a server's CPU time)
+            block = self.records[self.config_now]
+            return self._framed(index, block.view(np.uint8).reshape(block.shape[0], -1)[k].tobytes(), tq,
+                                bad_crc), delay
+        rec = self.records[self.config_now][k:k + 1].copy()
         names = self._names
         if cfg_bit:
             for j in range(len(names)):
@@ -664,14 +670,18 @@ class PmuServer:
                 delay = max(delay, float(f.value))
             elif f.kind == "crc":
                 bad_crc = True
+        return self._framed(index, rec.tobytes(), tq, bad_crc), delay
+
+    def _framed(self, index: int, data, tq: int, bad_crc: bool) -> bytes:
+        """A data frame at grid ``index`` around the data block ``data`` (bytes)."""
         soc, frac = c3.grid_time(index, self.time_base, self.source.rate)
-        head = struct.pack(">BBHHII", c3.SYNC_BYTE, c3.DATA << 4 | 1, c3.COMMON + rec.itemsize + 2,
+        head = struct.pack(">BBHHII", c3.SYNC_BYTE, c3.DATA << 4 | 1, c3.COMMON + len(data) + 2,
                            self.idcode, soc, tq << 24 | frac)
-        body = head + rec.tobytes()
+        body = head + data
         crc = c3.crc_ccitt(body) ^ (0xFFFF if bad_crc else 0)
         if bad_crc:
             self.stats["bad_crc"] += 1
-        return body + struct.pack(">H", crc), delay
+        return body + struct.pack(">H", crc)
 
     async def _produce(self):
         loop = asyncio.get_running_loop()
