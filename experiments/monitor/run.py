@@ -388,7 +388,7 @@ def _capacity_row(s: dict, rate: int, n: int, streams: int, wall: float, cpu_s: 
             "inertia_delay_s": s.get("inertia_delay_s"), "updates": s["updates"], "wall_s": round(wall, 1),
             "process_cpu_s": None if cpu_s is None else round(cpu_s, 1),
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
-            "busy_fraction": p.get("mean", np.nan) * rate / 1e3 if p else None,
+            "busy_fraction": p.get("mean", np.nan) * rate * streams / 1e3 if p else None,   # frames of every stream
             "keeps_up": bool(d) and d.get("max", np.inf) <= KEEP_UP_DELAY_S}
 
 
@@ -615,15 +615,16 @@ def report(doc) -> str:
 
 
 def _capacity_table(c, title) -> list[str]:
-    lines = [f"## {title} ({c['seconds']:g} s each, real time, window 30 s)", "",
-             "| frames/s | units | streams | frame period [ms] | processing per frame median / 99 % [ms] | "
+    lines = [f"## {title} (real time, window 30 s)", "",
+             "| frames/s | units | streams | run [s] | frame period [ms] | processing per frame median / 99 % [ms] | "
              "CPU per frame median / 99 % [ms] | busy fraction | delay median / 99 % / max [s] | "
              "area estimate delay median / 99 % [s] | peak memory [MiB] | keeps up |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in c["rows"]:
         p, d = r["processing_ms_per_frame"] or {}, r["delay_s"] or {}
         cpu, e = r.get("processing_cpu_ms_per_frame") or {}, r.get("inertia_delay_s") or {}
-        lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r['frame_period_ms']:.1f} | "
+        lines.append(f"| {r['frames_per_s']} | {r['units']} | {r.get('streams', 1)} | {r.get('seconds', c['seconds']):g} | "
+                     f"{r['frame_period_ms']:.1f} | "
                      f"{_f(p.get('median'))} / {_f(p.get('p99'))} | {_f(cpu.get('median'))} / {_f(cpu.get('p99'))} | "
                      f"{_f(r['busy_fraction'], '.2f')} | "
                      f"{_f(d.get('median'))} / {_f(d.get('p99'))} / {_f(d.get('max'))} | "
