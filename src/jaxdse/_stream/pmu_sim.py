@@ -634,7 +634,7 @@ class PmuServer:
         tq, delay, bad_crc = 0, 0.0, False
         if not cfg_bit and not any(f.covers(t_stream, half) for f in self.faults):
             # the recorded bytes as they are: a structured record's copy and tobytes() go field by
-            # field (5 per station: 5 ms a frame at 836 stations, most of a server's CPU time)
+            # field (5 per station: 2.3 ms a frame at 836 stations against 0.14 ms, most of a server's CPU)
             block = self.records[self.config_now]
             return self._framed(index, block.view(np.uint8).reshape(block.shape[0], -1)[k].tobytes(), tq,
                                 bad_crc), delay
