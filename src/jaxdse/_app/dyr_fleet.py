@@ -179,6 +179,8 @@ class _Played(NamedTuple):
     q_pu: np.ndarray
     omega_pu: np.ndarray
     ok: np.ndarray
+    fixed: np.ndarray
+    """Frame intervals played at the fixed step (:class:`PlaybackSettings` ``fixed_substeps``)."""
 
 
 def _batch(units, series, settings):
@@ -190,7 +192,7 @@ def _batch(units, series, settings):
         r = jax.lax.map(lambda d: play_back(*eqx.combine(d, static), settings), dyn)
     else:
         r = eqx.filter_vmap(play_back, in_axes=(0, 0, None))(units, series, settings)
-    return r.p_pu, r.q_pu, r.omega_pu, r.ok
+    return r.p_pu, r.q_pu, r.omega_pu, r.ok, r.fixed_step_intervals
 
 
 def _start(unit, series, settings):
@@ -333,16 +335,27 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
         for j, (name, k, _, series) in enumerate(order[i]):
             if isinstance(res, Expired):
                 nan = np.full(np.shape(series.t_s), np.nan)
-                results[(name, k)] = _Played(nan, nan, nan, np.asarray(False))
+                results[(name, k)] = _Played(nan, nan, nan, np.asarray(False), np.asarray(0))
                 notes[name].append(f"unit {k + 1}: {res.reason}")
             else:
-                results[(name, k)] = jax.tree.map(lambda a, j=j: a[j], res)
+                results[(name, k)] = played = jax.tree.map(lambda a, j=j: a[j], res)
+                if int(played.fixed) > 0:
+                    notes[name].append(_fixed_step_note(k, jobs[name][0].units[k].models,
+                                                       int(played.fixed), settings.fixed_substeps))
             left[name] -= 1
             if not left[name]:
                 pm = jobs[name][0]
                 pb = _plant_playback(pm, [results.pop((name, i)) for i in range(len(pm.units))])
                 pb.notes = notes[name]
                 yield name, pb
+
+
+def _fixed_step_note(k: int, models: dict, intervals: int, substeps: int) -> str:
+    """The note of a unit whose playback took the fixed step over ``intervals`` frame intervals."""
+    name = models.get("machine", models.get("converter"))
+    return (f"unit {k + 1} ({name}): {intervals} frame interval(s) played at a fixed step of "
+            f"1/{substeps} frame, where the adaptive step could not pass a limit that switches at "
+            f"every step (a PI sliding along its non-windup limit)")
 
 
 def _plant_playback(pm: PlantModel, rs: list) -> PlantPlayback:

@@ -41,7 +41,19 @@ class PlaybackSettings(eqx.Module):
     substeps: int = eqx.field(static=True, default=4)
     """The first step of each frame interval is 1/``substeps`` of it."""
     max_steps_per_frame: int = eqx.field(static=True, default=256)
-    """Steps allowed per frame interval ("tsit5"); more: the playback is not ``ok``."""
+    """Steps allowed per frame interval ("tsit5"); more: the interval is played again at the
+    fixed step (``fixed_substeps``)."""
+    fixed_substeps: int = eqx.field(static=True, default=64)
+    """"tsit5": a frame interval whose adaptive solve does not reach its end is played again with
+    this many fixed Tsit5 steps (0: not; the playback is then not ``ok``). The case: a PI whose
+    output sits on its non-windup limit while its proportional part moves (REECA1's voltage PI
+    during a fault): the exact solution slides along the limit, the integrator switching between
+    blocked and free at every trial step, and the step control cannot pass (4,204 accepted and
+    15,796 rejected steps in one interval of a Texas 7k REGCA1/REECA1/REPCA1 plant). A fixed step
+    switches at most once per step, as PSS/E's fixed step does, and converges to the sliding
+    solution (that interval's end at 64 steps against 4,096: 0.03 pu in the PI's state, which the
+    limit's clip keeps from the output, 1e-5 pu in the others). Under vmap the steps are taken
+    only where a unit needs them (the fallback's loop runs 0 times otherwise)."""
     init_s: float = eqx.field(static=True, default=0.5)
     """The initial steady state is the power flow averaged over the quiet stretch before the
     first event (:func:`quiet_frames`), at least this long [s]."""
@@ -112,6 +124,9 @@ class PlaybackResult(eqx.Module):
     references: UnitReferences | IbrReferences | GfmReferences
     ok: Array
     """True when the solver reached the end with finite states."""
+    fixed_step_intervals: Array
+    """Frame intervals played at the fixed step because the adaptive step could not pass them
+    (``PlaybackSettings.fixed_substeps``; 0 with "kvaerno5")."""
 
 
 def quiet_frames(series: TerminalSeries, settings: PlaybackSettings):
@@ -214,6 +229,21 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
     return inputs
 
 
+def _fixed_steps(rhs, y, n, m):
+    """``n`` (0 or ``m``, traced) Tsit5 steps of 1/``m`` over s in [0, 1] from ``y``: a
+    ``while_loop``, so that under vmap the steps are taken only while some unit needs them."""
+    solver, term = diffrax.Tsit5(scan_kind="lax"), diffrax.ODETerm(rhs)   # forward-mode: no
+    h = 1.0 / m                                                            # checkpointed stages
+
+    def body(c):
+        i, y, st = c
+        y1, _, _, st, _ = solver.step(term, i * h, (i + 1) * h, y, None, st, False)
+        return i + 1, y1, st
+
+    st = solver.init(term, 0.0, h, y, None)
+    return jax.lax.while_loop(lambda c: c[0] < n, body, (jnp.zeros((), int), y, st))[1]
+
+
 def _frame_of(s):
     """(interval, fraction) of the time ``s`` in frames: left-continuous at the frames (frame k
     is the end of interval k - 1; frame 0 the start of interval 0)."""
@@ -263,11 +293,16 @@ def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
                                       stepsize_controller=controller,
                                       max_steps=settings.max_steps_per_frame, throw=False,
                                       adjoint=diffrax.ForwardMode())
-            return sol.ys[-1], (sol.ys[-1], sol.result == diffrax.RESULTS.successful)
+            adaptive = sol.result == diffrax.RESULTS.successful
+            y1 = sol.ys[-1]
+            if settings.fixed_substeps > 0:
+                y1 = jnp.where(adaptive, y1, _fixed_steps(rhs, y, jnp.where(
+                    adaptive, 0, settings.fixed_substeps), settings.fixed_substeps))
+            return y1, (y1, adaptive | (settings.fixed_substeps > 0), ~adaptive)
 
-        _, (ys, solved) = jax.lax.scan(frame, y0, jnp.arange(ts.shape[0] - 1))
+        _, (ys, solved, fixed) = jax.lax.scan(frame, y0, jnp.arange(ts.shape[0] - 1))
         ys = jnp.concatenate([y0[None], ys])
-        solved = jnp.all(solved)
+        solved, n_fixed = jnp.all(solved), jnp.sum(fixed)
     else:
         def rhs(s, y, args):  # in frames: dy/ds = dt dy/dt
             return jax.tree_util.tree_map(lambda d: dt * d,
@@ -279,6 +314,7 @@ def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
                                   stepsize_controller=controller, max_steps=64 * ts.shape[0],
                                   throw=False, adjoint=diffrax.ForwardMode())
         ys, solved = sol.ys, sol.result == diffrax.RESULTS.successful
+        n_fixed = jnp.zeros((), int)
 
     def outputs(s, y):
         if gfm:
@@ -295,13 +331,16 @@ def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
     if gfm:  # (efd, tm are omega, delta here; the field voltage and torque do not apply)
         nan = jnp.nan * p
         return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=efd, delta_rad=tm, efd_pu=nan,
-                              tm_pu=nan, references=refs, ok=ok)
+                              tm_pu=nan, references=refs, ok=ok,
+                              fixed_step_intervals=n_fixed)
     if ibr:
         return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=efd, delta_rad=efd, efd_pu=efd,
-                              tm_pu=tm, references=refs, ok=ok)
+                              tm_pu=tm, references=refs, ok=ok,
+                              fixed_step_intervals=n_fixed)
     m = unit.machine.n_states
     return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=ys[:, m - 1], delta_rad=ys[:, m - 2],
-                          efd_pu=efd, tm_pu=tm, references=refs, ok=ok)
+                          efd_pu=efd, tm_pu=tm, references=refs, ok=ok,
+                              fixed_step_intervals=n_fixed)
 
 
 play_back = eqx.filter_jit(_play_back)
