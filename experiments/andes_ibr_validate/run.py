@@ -6,7 +6,9 @@ ANDES 2.0.0): the true records against every recording, and planted errors found
 ``--joint``: also the true records on all recordings jointly; ``--model-error=X``: [calibrate]
 model_error = X (default 1 %), results_model_error_X.*.
 ``andes_ibr``: the bench of ``experiments/andes_ibr`` instead (REGCA1 + REECA1, REPCA1 off; its
-records match ANDES within 0.01 % of MBASE): three recordings, planted Kqv only. The REPCA1 bench
+records match ANDES within 0.01 % of MBASE): three recordings, planted Kqv only.
+``andes_gfm``: the grid-forming converter of ``experiments/andes_gfm`` (ANDES REGCV1 at bus 8, its
+record written from truth.json in ANDES's parameter order): three recordings, planted M = 2H. The REPCA1 bench
 of ``generate.py`` does not yet agree with ANDES (see results.md), so that is the one run.
 
 1. Pass rate: the true plant.dyr validated on each recording alone; a recording passes when
@@ -45,27 +47,33 @@ CASE = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
 # the fault of generate.py stops in ANDES (its Newton step fails after the clearing, at 1.16 s):
 # the REPCA1 bench has three events; Kqv (a voltage dip) is planted on the andes_ibr bench
 BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed"), ".csv.gz"),
-           "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault"), ".csv")}
+           "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault"), ".csv"),
+           "andes_gfm": (HERE.parent / "andes_gfm", ("line_trip", "load_step", "gen_trip"), ".csv.gz")}
 BENCH = next((a for a in sys.argv[1:] if not a.startswith("-")), "andes_ibr_validate")
 MODEL_ERROR = next((float(a.split("=")[1]) for a in sys.argv[1:] if a.startswith("--model-error=")), None)
 """[calibrate] model_error (None: jaxdse's default, 1 %)."""
 STEM = ("results" if BENCH == "andes_ibr_validate" else f"results_{BENCH}") + (
     "" if MODEL_ERROR is None else f"_model_error_{MODEL_ERROR:g}")
 DATA, EVENTS, SUFFIX = BENCHES[BENCH]
-COLS = ('time = "time_s", frequency = "B8/F", v_mag = "B8/VM", v_ang = "B8/VA", i_mag = "B8/IM", '
-        'i_ang = "B8/IA"')
-PLANTED = ((("REPCA1", "Ddn"), ("REPCA1", "Kp"), ("REPCA1", "Ki"))
-           if BENCH == "andes_ibr_validate" else (("REECA1", "Kqv"),))
+TAG = "B8_VSG" if BENCH == "andes_gfm" else "B8"
+COLS = (f'time = "time_s", frequency = "{TAG}/F", v_mag = "{TAG}/VM", v_ang = "{TAG}/VA", '
+        f'i_mag = "{TAG}/IM", i_ang = "{TAG}/IA"')
+PLANTED = {"andes_ibr_validate": (("REPCA1", "Ddn"), ("REPCA1", "Kp"), ("REPCA1", "Ki")),
+           "andes_ibr": (("REECA1", "Kqv"),), "andes_gfm": (("REGCV1", "M"),)}[BENCH]
+"""andes_gfm: the grid-forming converter's virtual inertia M = 2H (H planted x0.7 and x1.3)."""
 FACTORS = (0.7, 1.3)
 # PSS/E order of the records' values after ``bus 'MODEL' id`` (jaxdse.IBR_FIELDS)
-FIELDS = {"REECA1": jaxdse.IBR_FIELDS["REECA1"], "REPCA1": jaxdse.IBR_FIELDS["REPCA1"]}
+FIELDS = {m: jaxdse.IBR_FIELDS[m] for m in ("REECA1", "REPCA1", "REGCV1")}
 PASS = ("consistent with the .dyr", "nothing identifiable")
 
 
 def pmu_csv(event: str, dst: Path) -> str:
     """ANDES's terminal |V|, angle, frequency and P, Q as a PMU's columns (current out of the
-    terminal, pu on the 100 MVA base = MBASE)."""
+    terminal, pu on the 100 MVA base = MBASE); andes_gfm's recordings are in those columns."""
     d = pd.read_csv(DATA / f"{event}{SUFFIX}")
+    if BENCH == "andes_gfm":
+        d.to_csv(dst / f"{event}.csv", index=False)
+        return f"{event}.csv"
     v = d["v_pu"] * np.exp(1j * d["angle_rad"])
     i = np.conj((d["p_pu"] + 1j * d["q_pu"]) / v)
     pd.DataFrame({"time_s": d["t_s"], "B8/F": 60.0 * (1.0 + d["freq_dev_pu"]), "B8/VM": d["v_pu"],
@@ -74,10 +82,19 @@ def pmu_csv(event: str, dst: Path) -> str:
     return f"{event}.csv"
 
 
+def plant_dyr() -> str:
+    """The bench's records: plant.dyr, or andes_gfm's REGCV1 record written from its truth.json
+    (ANDES's constants in the order of ``jaxdse.IBR_FIELDS["REGCV1"]``)."""
+    if BENCH != "andes_gfm":
+        return (DATA / "plant.dyr").read_text()
+    c = json.loads((DATA / "truth.json").read_text())["constants"]
+    return f"8 'REGCV1' '1' {' '.join(f'{c[k]:g}' for k in FIELDS['REGCV1'])} /\n"
+
+
 def plant_records(model: str | None = None, label: str | None = None, factor: float = 1.0) -> str:
-    """plant.dyr with one constant scaled."""
+    """The bench's records with one constant scaled."""
     out = []
-    for line in (DATA / "plant.dyr").read_text().splitlines():
+    for line in plant_dyr().splitlines():
         m = re.match(r"(\d+ '(\w+)' '\w+' )(.*) /$", line)
         if m and m.group(2) == model:
             vals = m.group(3).split()
@@ -114,7 +131,7 @@ def run(tmp: Path, events, dyr_text: str, name: str) -> dict:
 
 def main():
     rows = {}
-    for line in (DATA / "plant.dyr").read_text().splitlines():
+    for line in plant_dyr().splitlines():
         m = re.match(r"\d+ '(\w+)' '\w+' (.*) /$", line)
         if m and m.group(1) in FIELDS:
             rows[m.group(1)] = m.group(2).split()
@@ -205,6 +222,8 @@ def markdown(out) -> str:
                          f"{x['filed_value']:.4g} | {100 * (x['filed_value'] - x['truth']) / x['truth']:+.2f} % | {ci} |")
     if out["bench"] == "andes_ibr_validate":
         lines += ["", NOTES]
+    if out["bench"] == "andes_gfm":
+        lines += ["", GFM_NOTES]
     return "\n".join(lines) + "\n"
 
 
@@ -221,6 +240,13 @@ NOTES = """## Notes
   that (1 % model error): on the joint runs it is rejected and changed even when it is not the
   planted one. That is the playback's own error against ANDES in the voltage loop (not
   diagnosed); `--model-error=0.02` shows the same runs with 2 %."""
+
+
+GFM_NOTES = """## Notes
+
+* M is the converter's virtual inertia M = 2H (H = 4 s): planting M x0.7 and x1.3 plants H so.
+* The recordings are ANDES's, without added noise (`experiments/andes_gfm/run.py` adds PMU noise
+  for its own table); the intervals carry the 1 % model error of `[calibrate]`."""
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """The grid-forming converter REGCV1 (and REGCV2): its steady state, its playback against ANDES
-2.0.0 (the independent trace of STYLE 20) and its inertia identified from a stored recording.
+2.0.0 (the independent trace of STYLE 20); its inertia from a recording: tests/app/test_gfm_fleet.py.
 
 The recordings (``experiments/andes_gfm/*.csv.gz``, made by ``experiments/andes_gfm/generate.py``
 with ANDES in its own venv) hold the converter's terminal V and I phasors in the IEEE 14-bus
@@ -117,23 +117,6 @@ def test_playback_matches_andes(model, line_trip):
     assert np.max(np.abs(np.asarray(r.omega_pu) - omega)) < 0.02 * swing
     assert np.sqrt(np.mean((np.asarray(r.p_pu) - s.real)[after] ** 2)) < 2e-3
     assert np.sqrt(np.mean((np.asarray(r.q_pu) - s.imag)[after] ** 2)) < 2e-3
-
-
-def test_inertia_from_stored_recording(line_trip):
-    """Round trip on the stored ANDES recording: M and D fitted to P and Q by the playback,
-    started 50 % and 150 % off, give H = M/2 within 2 % of the truth, its interval covering."""
-    meta, series, _, _ = line_trip
-    unit = GfmUnit(gfm_from_andes("REGCV1", {**meta["constants"], "M": 12.0, "D": 5.0}))
-    specs = [jd.ParameterSpec("converter", "m_s", "M", 0.5, 100.0),
-             jd.ParameterSpec("converter", "d_pu", "D", 0.0, 100.0, positive=False)]
-    cal = jd.calibrate(unit, specs, jd.stack_events([series]),
-                       cal=jd.CalibrationSettings(input_draws=0))
-    h_true = meta["H_s"]
-    h, (lo, hi) = cal.values[0] / 2, cal.ci95[0] / 2
-    assert cal.converged
-    assert abs(h / h_true - 1) < 0.02, h
-    assert lo <= h_true <= hi
-    assert abs(cal.values[1] - meta["D_pu"]) < 0.1 * meta["D_pu"] + 0.2
 
 
 def test_classical_plant_of_a_converter():

@@ -80,6 +80,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._dyr.gfm_unit import GfmUnit
 from .._dyr.ibr_unit import IbrUnit
 from .._dyr.inventory import GENERATOR_CATEGORIES, Inventory, inventory
 from .._dyr.limits import Start, describe, exciter_crossings, governor_crossings, rating_crossings
@@ -113,6 +114,9 @@ from .dyr_fleet import PlaybackOptions
 from .fleet_file import TOP
 from .progress import Progress
 from .repair import attach_carried, repair_console, repair_html, write_repair
+
+INVERTER_UNITS = (IbrUnit, GfmUnit)
+"""The units checked as inverter-based plants (held, voltage step, frequency step)."""
 
 OUTCOMES = ("pass", "data problem", "not supported", "fail")
 """The outcomes of a unit, in the order of the summary."""
@@ -674,7 +678,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         t0 = time.perf_counter()
         units = [statics[k].model.unit for k in members]
         n = len(members)
-        if isinstance(units[0], IbrUnit):   # held, voltage step, frequency step
+        if isinstance(units[0], INVERTER_UNITS):   # held, voltage step, frequency step
             per = [check_ibr.lanes(raw, gens[k], spec.step) for k in members]
             lanes = [p[j] for j in range(3) for p in per]
             fn, split = check_ibr.batch_jit(), (lambda r, j: (check_ibr.at(r, j), (
@@ -693,7 +697,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
         # one compiled call per model structure and solver, side by side on the cores; every
         # wait bounded (a limit from the group's work), an expired group's units marked
         tasks = [Task(f"group {_chain(entries[m[0]])} ({len(m)} unit(s), {how.solver})",
-                      wait_limit_s(len(m) * (3 if isinstance(statics[m[0]].model.unit, IbrUnit) else 2) // 2,
+                      wait_limit_s(len(m) * (3 if isinstance(statics[m[0]].model.unit, INVERTER_UNITS) else 2) // 2,
                                    spec, how.solver, how.substeps),
                       lambda m=m, how=how: one_group(m, how), COMPILE_LIMIT_S) for m, how in batches]
         for i, value in bounded(tasks, n_workers, threads=in_threads):
@@ -730,7 +734,7 @@ def check_case(case: CaseFile, *, out_of_service: bool = False, spec: CheckSpec 
                 entries[k]["solver"] = "kvaerno5"
         execute([(m, implicit) for m in sorted(stiff.values(), key=len, reverse=True)])
     for k, (held, step, how) in done.items():
-        if isinstance(statics[k].model.unit, IbrUnit):
+        if isinstance(statics[k].model.unit, INVERTER_UNITS):
             outcome, reasons, numbers, notes = check_ibr.judge(statics[k], gens[k], held, step, spec)
             entries[k].update(outcome=outcome, reasons=reasons, numbers=numbers)
             entries[k]["notes"] += notes

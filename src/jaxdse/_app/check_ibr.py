@@ -36,6 +36,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._dyr.gfm_unit import GfmUnit
 from .._dyr.ibr_unit import IbrUnit
 from .._dyr.inventory import is_converter
 from .._dyr.records import PSSE_IBR_MODELS, ibr_model
@@ -95,7 +96,7 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator, horizon_s: float = 2
     bus = raw.buses.get(g.bus)
     if bus is None or bus.problem or not (math.isfinite(bus.vm_pu) and bus.vm_pu > 0):
         problems.append(("bus", f"bus {g.bus} of the generator: no usable voltage VM"))
-    elif um.unit is not None and not problems:
+    elif isinstance(um.unit, IbrUnit) and not problems:   # (a grid-forming converter has no such limits)
         problems += _crossings(um.unit, records, g, bus.vm_pu, horizon_s)
     return IbrStatic(models, records, unsupported, problems, um, [])
 
@@ -204,11 +205,13 @@ def _one(unit: IbrUnit, lane: IbrLane, run) -> IbrResult:
         on = t > run.step_at_s
         k = 1.0 + jnp.where(on, lane.v_step, 0.0)
         dv = jnp.where(on, lane.v_step * v0, 0.0)
+        u = UnitInputs(lane.v_re * k, lane.v_im * k, jnp.where(on, lane.f_step, 0.0), zero)
+        if isinstance(unit, GfmUnit):
+            return u, refs._replace(v_ref_pu=refs.v_ref_pu + dv)
         e = refs.electrical._replace(v_ref0_pu=refs.electrical.v_ref0_pu + dv,
                                      v_ref1_pu=refs.electrical.v_ref1_pu + dv)
         p = refs.plant._replace(v_ref_pu=refs.plant.v_ref_pu + dv)
-        return (UnitInputs(lane.v_re * k, lane.v_im * k, jnp.where(on, lane.f_step, 0.0), zero),
-                refs._replace(electrical=e, plant=p))
+        return u, refs._replace(electrical=e, plant=p)
 
     def rhs(t, y, args):
         return unit.vector_field(y, *at(t))
@@ -262,6 +265,11 @@ OPEN_LOOP_NOTE = ("REECA1/REECB1/REECCU1 QFLAG = 1 with VFLAG = 1: its Q loop se
                   "open (two integrators in series, undamped), so the voltage step is run but not judged")
 
 
+GFM_NOTE = ("a grid-forming converter (REGCV1, REGCV2) sets its angle and voltage through the network: "
+            "with its terminal voltage imposed its virtual rotor has no synchronising power (two modes at "
+            "0 at rest), so the voltage and frequency steps are run but not judged (the held run is)")
+
+
 def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], spec
           ) -> tuple[str, list[str], dict, list[str]]:
     """(outcome, reasons, numbers, notes) of a plant that was simulated."""
@@ -291,8 +299,10 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
                      f"(limit {spec.max_pq_error:g})")
     if fails:
         return "fail", fails, numbers, []
-    open_loop = unit.electrical is not None and bool(unit.electrical.qflag) and bool(unit.electrical.vflag)
-    notes = [OPEN_LOOP_NOTE] if open_loop else []
+    elec = getattr(unit, "electrical", None)   # (none in a grid-forming converter)
+    open_loop = elec is not None and bool(elec.qflag) and bool(elec.vflag)
+    gfm = isinstance(unit, GfmUnit)
+    notes = [OPEN_LOOP_NOTE] if open_loop else [GFM_NOTE] if gfm else []
     t = np.arange(len(held["p"])) / spec.frame_hz
     after = t > spec.step_at_s
     win = t >= t[-1] - spec.settle_window_s - 1e-9
@@ -304,7 +314,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
             why.append(f"{label}: the solver did not reach the end (or states became non-finite)")
             continue
         moves = []
-        if key == "vstep" and open_loop:
+        if (key == "vstep" and open_loop) or gfm:
             continue
         for name, x in (("P", np.asarray(r["p"], float)), ("Q", np.asarray(r["q"], float))):
             seen = np.concatenate([x[:1], x[after]])

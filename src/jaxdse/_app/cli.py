@@ -175,7 +175,10 @@ beyond these are listed, not fatal. A bus whose units have inverter-based record
 REGCB1 + REECA1, REECB1 or REECCU1, optionally REPCA1) and no machine
 record is an inverter-based plant: no rotor, so no H
 or D ("not applicable"); with model = "dyr" its records are played back and P against
-frequency, Q against voltage judged by the same windows (MOD-026-2).
+frequency, Q against voltage judged by the same windows (MOD-026-2). A grid-forming converter
+(an ANDES REGCV1 or REGCV2 record: `bus 'REGCV1' id Tc kw kv M D ra xs Kpvd Kivd Kpvq Kivq KpId
+KiId KpIq KiIq /`) has a virtual rotor: with model = "dyr" its H = M/2 and D are fitted to the
+recording by its playback, with an interval and a verdict.
 
 {FLEET_MODELS}
 
@@ -463,7 +466,9 @@ VMAX/VMIN (VFLAG = 0) or REECCU1's SOC limits, at the start or within the runs (
 of charge integrates P and is left out of the at-rest test).
 A step still settling at 21 s with every mode decaying is a note (its time constant), and so is
 the voltage step of QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
-network: open with the voltage imposed). Other converter models (WT4G1, PVGU1, REECDU1, ...)
+network: open with the voltage imposed). A grid-forming converter (REGCV1, REGCV2) gets the
+held run judged and its steps run unjudged (with its voltage imposed its virtual rotor has no
+synchronising power). Other converter models (WT4G1, PVGU1, REECDU1, ...)
 are units, not supported, named.
 
 Every generator record of the .raw is accounted for (the counts add up to the .raw's): the

@@ -26,6 +26,7 @@ from .._dyr.playback import (
     play_back,
     steady_start,
 )
+from .._dyr.gfm_unit import GfmUnit
 from .._dyr.records import UnitModel, ibr_model, unit_model
 from .._dyr.stiff import modes, stiff_note, too_stiff
 from .._many import programs
@@ -151,7 +152,9 @@ def plant_model(raw, dyr, plant, options: PlaybackOptions = PlaybackOptions()) -
         units = [ibr_model(dyr, plant.bus, m.id, raw) for m in plant.members]
         w_s = 2 * np.pi * raw.basfrq_hz
         for u in units:
-            if u.unit is not None:
+            if isinstance(u.unit, GfmUnit):   # the converter holds its nominal frequency
+                u.unit = eqx.tree_at(lambda x: x.converter.omega_s_rad_s, u.unit, jnp.asarray(w_s))
+            elif u.unit is not None:
                 u.unit = eqx.tree_at(lambda x: x.omega_s_rad_s, u.unit, jnp.asarray(w_s))
     else:
         units = [unit_model(dyr, raw, plant.bus, m.id, ke_zero=options.ke_zero) for m in plant.members]

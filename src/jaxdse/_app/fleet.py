@@ -37,6 +37,7 @@ from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
 from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_plants, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
+from .fleet_gfm import is_grid_forming, virtual_inertia
 from .fleet_inertia import fleet_inertia, inertia_document, inertia_figure, write_inertia_csv
 from .fleet_plants import NO_ROTOR
 from .fleet_report import write_report
@@ -108,7 +109,12 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
         (p, _, _, quality), a = units[index[name]], fronts[name]
         if p.ibr:
             tr = ibr_traces(a, dyr)
-            done[name] = (tr, ibr_entry(p, a, tr, quality, fleet.criteria, dyr))
+            entry = ibr_entry(p, a, tr, quality, fleet.criteria, dyr)
+            if is_grid_forming(dyr):
+                progress.note(f"jaxdse: {p.name}: a grid-forming converter: fitting its virtual "
+                              "inertia M = 2H and damping D to the recording")
+                entry.update(gfm_entry(virtual_inertia(a, dyr, fleet.playback.settings, fleet.calibrate)))
+            done[name] = (tr, entry)
         else:
             done[name] = (_traces(a.estimate, a.replay, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))
         progress.step(f"assessed {p.name}")
@@ -352,6 +358,31 @@ def ibr_entry(p: FleetPlant, front: IbrTerminal, traces: dict, quality: dict, cr
     }
     out.pop("surrogate_playback_rms_percent_mbase", None)   # a machine's surrogate: not applicable
     return out
+
+
+def gfm_entry(v: dict) -> dict:
+    """The fleet.json fields of a grid-forming converter's virtual H and D (``virtual_inertia``)
+    over an inverter-based plant's ``not applicable`` ones."""
+    half = v["relative_ci_percent"]
+    d_word = "negative" if v["D_ci95"][1] < 0 else "identified" if v["verdict"] == "identified" \
+        else "not identified"
+    return {
+        "plant_type": "grid-forming",
+        "estimator": ("virtual rotor: H = M/2 and D of the converter's own record fitted to the "
+                      "recording by its playback (the swing-equation estimator is not run on it)"),
+        "H_s": v["H_s"], "H_ci95": v["H_ci95"], "H_reference_s": v["H_record_s"],
+        "H_error_percent": 100 * (v["H_s"] / v["H_record_s"] - 1),
+        "D": v["D"], "D_ci95": v["D_ci95"], "D_record": v["D_record"],
+        "D_verdict": d_word, "damping": {"verdict": d_word, "reasons": [GFM_D_MEANING]},
+        "verdict": v["verdict"], "reasons": v["reasons"],
+        "interval": {"relative_ci_percent": half, "noise_percent": None, "filter_spread_percent": None,
+                     "filter_refits_counted": None, "condition": None},
+        "virtual_inertia": v,
+    }
+
+
+GFM_D_MEANING = ("the converter's emulated damping D of its swing equation M d(dw)/dt = Pref - Pe "
+                 "- D dw [pu power / pu speed], fitted with M: the record's D, not a lumped damping")
 
 
 def damping_entry(e: dict, p: FleetPlant) -> dict:

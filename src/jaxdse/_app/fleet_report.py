@@ -53,6 +53,10 @@ document.querySelectorAll('table.sortable th').forEach(function (th, col) {
 """
 
 
+INVERTER_TYPES = ("inverter-based", "grid-forming")
+"""fleet.json's ``plant_type`` of the plants that get the inverter-based page (P/f and Q/V)."""
+
+
 def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -> None:
     """Write report.html, report.md, overview.png and units/<name>.html (+ .png)."""
     out_dir = Path(out_dir)
@@ -63,14 +67,14 @@ def write_report(out_dir: Path, doc: dict, traces: dict, figures: bool = True) -
         playback = PlaybackFigure()
         try:
             for e in units:
-                if e.get("plant_type") == "inverter-based":
+                if e.get("plant_type") in INVERTER_TYPES:
                     ibr_figure(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
                 else:
                     playback.draw_unit(e, traces[e["name"]], out_dir / "units" / f"{e['name']}.png")
         finally:
             playback.close()
     for e in units:
-        page = ibr_unit_page if e.get("plant_type") == "inverter-based" else unit_page
+        page = ibr_unit_page if e.get("plant_type") in INVERTER_TYPES else unit_page
         (out_dir / "units" / f"{e['name']}.html").write_text(page(e, doc, figures))
     (out_dir / "report.html").write_text(fleet_page(doc, figures))
     (out_dir / "report.md").write_text(fleet_markdown(doc))
@@ -651,6 +655,24 @@ def ibr_figure(e: dict, tr: dict, path: Path) -> list[str]:
     return labels
 
 
+def _virtual_inertia(e: dict) -> str:
+    """A grid-forming converter's virtual H and D (fleet.json's ``virtual_inertia``) in words."""
+    v = e["virtual_inertia"]
+    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in e["reasons"].values())
+    return f"""<p>{html.escape(e['estimator'])}.</p>
+<table><tr><td>virtual inertia H = M/2 [s]</td><td>{_f(v['H_s'], '.3f')}</td></tr>
+<tr><td>95 % interval [s]</td><td>{_f(v['H_ci95'][0], '.3f')} – {_f(v['H_ci95'][1], '.3f')}
+ (±{_f(v['relative_ci_percent'], '.1f')} %)</td></tr>
+<tr><td>H in the record [s]</td><td>{_f(v['H_record_s'], '.3f')}</td></tr>
+<tr><td>damping D [pu power / pu speed]</td><td>{_f(v['D'], '.3f')} ({_f(v['D_ci95'][0], '.3f')} –
+ {_f(v['D_ci95'][1], '.3f')}); in the record {_f(v['D_record'], '.3f')}</td></tr>
+<tr><td>playback RMS error [% MBASE], the record's M, D → fitted</td><td>
+ P {_f(100 * v['rms_before_pu'][0], '.3g')} → {_f(100 * v['rms_after_pu'][0], '.3g')},
+ Q {_f(100 * v['rms_before_pu'][1], '.3g')} → {_f(100 * v['rms_after_pu'][1], '.3g')}</td></tr>
+</table>{f'<ul>{reasons}</ul>' if reasons else ''}
+<p class="small">{html.escape(e['damping']['reasons'][0])}.</p>"""
+
+
 def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
     """An inverter-based plant's page: no H or D (no rotor), the validation in MOD-026-2's
     terms (P/f and Q/V panels, the window scores), the records played back and their notes."""
@@ -682,7 +704,8 @@ def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
 {'plant terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
 {repairs_box(e.get("repairs") or [])}
 <h2>Inertia H and damping D: {_badge(e['verdict'])}</h2>
-<p>{html.escape(e['reasons'].get('no_rotor', ''))}: the swing-equation estimator does not apply.</p>
+{_virtual_inertia(e) if e.get('plant_type') == 'grid-forming' else
+ f"<p>{html.escape(e['reasons'].get('no_rotor', ''))}: the swing-equation estimator does not apply.</p>"}
 <h2>Model validation: {_vbadge(e)}</h2>
 <p>{val_text}</p>{f'<ul>{val_reasons}</ul>' if val_reasons else ''}
 <p class="small">What was validated: {html.escape(val['scope'])}.</p>

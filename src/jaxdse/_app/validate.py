@@ -47,6 +47,7 @@ from .._dyr.calibrate import (
     stack_events,
 )
 from .._dyr.playback import PlaybackSettings, play_back
+from .._dyr.records import GFM_MODELS
 from .._io.errors import InputError
 from .._io.measurement import condition, order_note
 from .._io.psse import GOVERNOR_FIELDS, GOVERNOR_PARAMETERS, MACHINE_FIELDS
@@ -79,14 +80,19 @@ DEFAULT_PARAMETERS = {
     "REECB1": (("kqv", "Kqv"),),
     "REECCU1": (("kqv", "Kqv"),),
     "REPCA1": (("kp", "Kp"), ("ki", "Ki"), ("ddn_pu", "Ddn"), ("dup_pu", "Dup")),
+    "REGCV1": (("m_s", "M"), ("d_pu", "D")),
+    "REGCV2": (("m_s", "M"), ("d_pu", "D")),
 }
 """The default parameter set per model: H and D, the exciter's main gain and time constant, the
 governor's droop (IEEEG1: its gain K = 1/R) and main time constant; of an inverter-based plant
 the gains an engineer tunes on site (its time constants are mostly below a frame period): the
 electrical controls' voltage-dip reactive gain Kqv, the plant controller's voltage-loop PI gains
-Kp, Ki and its frequency droops Ddn (over-frequency) and Dup (under-frequency)."""
+Kp, Ki and its frequency droops Ddn (over-frequency) and Dup (under-frequency); of a grid-forming
+converter (REGCV1, REGCV2) its virtual inertia M = 2H and damping D."""
 IBR_PARTS = ("electrical", "plant")
 """The parts of an inverter-based plant (:class:`~jaxdse._dyr.ibr_unit.IbrUnit`) calibrated."""
+GFM_PARTS = ("converter",)
+"""... of a grid-forming converter (:class:`~jaxdse._dyr.gfm_unit.GfmUnit`)."""
 MACHINE_PARTS = ("machine", "exciter", "governor")
 DROOPS = ("Ddn", "Dup")
 """REPCA1's droops: 0 is a valid setting (no droop that way), bounded like D from 0."""
@@ -103,7 +109,9 @@ D_BOUNDS = (0.0, 20.0)
 def parameter_specs(unit, models: dict, options, notes: list) -> list[ParameterSpec]:
     """The parameters to rank and calibrate, with their bounds (``options``: CalibrateOptions)."""
     out = []
-    for part in (IBR_PARTS if "converter" in models else MACHINE_PARTS):
+    parts = (MACHINE_PARTS if "converter" not in models
+             else GFM_PARTS if models["converter"] in GFM_MODELS else IBR_PARTS)
+    for part in parts:
         model = models.get(part)
         table = DEFAULT_PARAMETERS.get("machine" if part == "machine" else model, ())
         for field, label in table:

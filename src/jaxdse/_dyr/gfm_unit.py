@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import equinox as eqx
+import numpy as np
 
 from .._core.machine import Machine
 from .._core.plant import Plant
@@ -24,6 +25,18 @@ class GfmUnit(eqx.Module):
     """One grid-forming converter (machine base = the converter's Sn)."""
 
     converter: REGCV1
+
+    PARTS = ("converter",)
+    """The unit's one part (as :class:`~jaxdse._dyr.ibr_unit.IbrUnit` names its parts)."""
+
+    @property
+    def sizes(self) -> tuple[int, ...]:
+        return (self.converter.n_states,)
+
+    @property
+    def at_rest(self) -> np.ndarray:
+        """Every state is held by the steady state."""
+        return np.ones(self.converter.n_states, bool)
 
     @property
     def omega_s_rad_s(self):

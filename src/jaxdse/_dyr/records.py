@@ -27,6 +27,7 @@ from .._models.exciters import EXCITERS, exciter_from_dyr
 from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, record_readings, vdl_trailing_zeros
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
+from .gfm_unit import GfmUnit
 from .ibr_unit import IbrUnit
 from .unit import DyrUnit
 
@@ -56,6 +57,9 @@ PSSE_IBR_MODELS: dict[str, str] = {
     "WTTQA1": "wind"}
 """Inverter-based resource models (WECC second generation, grid-forming, type-3 wind; simulated
 or not) and their role in a plant."""
+GFM_MODELS = frozenset({"REGCV1", "REGCV2"})
+"""The grid-forming converters simulated (ANDES's virtual synchronous generators): a
+:class:`GfmUnit` each, with a virtual inertia H = M/2."""
 
 
 @dataclass
@@ -80,7 +84,8 @@ class UnitModel:
 class IbrModel:
     """One inverter-based plant's .dyr model, or why it has none."""
 
-    unit: IbrUnit | None
+    unit: IbrUnit | GfmUnit | None
+    """The plant (grid-following: IbrUnit) or the grid-forming converter (GfmUnit)."""
     models: dict[str, str] = field(default_factory=dict)
     """{"converter": "REGCA1", "electrical": "REECA1", "plant": "REPCA1", "torque": "WTTQA1",
     ...} of the records used."""
@@ -149,6 +154,16 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
             if float(conv.t_e_s) > 0 and math.hypot(g.zr_pu, g.zx_pu) <= 1e-9:
                 out.notes.append(f"REGCB1: Te = {float(conv.t_e_s):g} s with ZSORCE = 0: a current source "
                                  "(Te not used)")
+    if not out.missing and out.models["converter"] in GFM_MODELS:
+        # a grid-forming converter is a whole unit: its own controls, no REEC/REPC/wind records
+        extra = [r for r in out.models if r != "converter"]
+        if extra:
+            out.missing.append(f"generator {bus} {machine_id!r}: {out.models['converter']} is a whole "
+                               f"grid-forming converter; its {', '.join(out.models[r] for r in extra)} "
+                               "record(s) have no place in it")
+        else:
+            out.unit = GfmUnit(parts["converter"])
+        return out
     if not out.missing:
         out.unit = IbrUnit(converter=parts["converter"], electrical=parts.get("electrical"),
                            plant=parts.get("plant"), torque=parts.get("torque"),

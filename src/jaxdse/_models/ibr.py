@@ -1443,12 +1443,14 @@ def gfm_from_andes(model: str, params: dict, fn_hz: float = 60.0) -> REGCV1:
 IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REGCB1": REGCB1, "REECA1": REECA1,
                                             "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1,
                                             "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1,
-                                            "WTTQA1": WTTQA1}
-"""The inverter-based resource models by their PSS/E name."""
+                                            "WTTQA1": WTTQA1, "REGCV1": REGCV1, "REGCV2": REGCV1}
+"""The inverter-based resource models by their PSS/E name (ANDES's for the grid-forming REGCV1
+and REGCV2: one module, ``inner`` "pi" or "lag")."""
 
 IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REGCB1": "converter", "REECA1": "electrical",
                              "REECB1": "electrical", "REECCU1": "electrical", "REPCA1": "plant",
-                             "WTDTA1": "drive", "WTARA1": "aero", "WTPTA1": "pitch", "WTTQA1": "torque"}
+                             "WTDTA1": "drive", "WTARA1": "aero", "WTPTA1": "pitch", "WTTQA1": "torque",
+                             "REGCV1": "converter", "REGCV2": "converter"}
 """What each model is in a plant: the converter, its electrical controls, the plant controller,
 and a type-3 wind turbine's drive train, aerodynamics, pitch and torque controllers."""
 
@@ -1461,6 +1463,8 @@ _REECB1_FIELDS = ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PQFLAG",
                   "Vdip", "Vup", "Trv", "dbd1", "dbd2", "Kqv", "Iqh1", "Iql1", "Vref0", "Tp", "QMax",
                   "QMin", "VMAX", "VMIN", "Kqp", "Kqi", "Kvp", "Kvi", "Tiq", "dPmax", "dPmin", "PMAX",
                   "PMIN", "Imax", "Tpord")
+
+_GFM_FIELDS = ("Tc", "kw", "kv", "M", "D", "ra", "xs", "Kpvd", "Kivd", "Kpvq", "Kivq")
 
 IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw", "Tg", "Rrpwr", "Brkpt", "Zerox", "Lvpl1", "Volim", "Lvpnt1", "Lvpnt0",
@@ -1481,15 +1485,19 @@ IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "WTPTA1": ("Kiw", "Kpw", "Kic", "Kpc", "Kcc", "Tp", "Thetamax", "Thetamin", "RThetamax",
                "RThetamin"),
     "WTTQA1": ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", *_WT_TABLE, "TRATE"),
+    "REGCV1": _GFM_FIELDS + ("KpId", "KiId", "KpIq", "KiIq"),
+    "REGCV2": _GFM_FIELDS + ("Tiq", "Tid"),
 }
 """PSS/E names of each record's values after ``bus 'MODEL' id``, ICONs first, in PSS/E order
-(Siemens PTI, PSS/E Model Library)."""
+(Siemens PTI, PSS/E Model Library). REGCV1 and REGCV2 have no PSS/E record: theirs is ANDES's
+parameter order, without Sn (the generator's MBASE), fn (the system's) and gammap, gammaq (the
+static generator's shares, 1 for a converter of its own)."""
 
 IBR_ICONS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw",), "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG"),
     "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag"),
     "REGCB1": ("RateFlag", "PQFlag"), "REECB1": _REECB1_FIELDS[:5], "REECCU1": _REECB1_FIELDS[:5],
-    "WTDTA1": (), "WTARA1": (), "WTPTA1": (), "WTTQA1": ("Tflag",)}
+    "WTDTA1": (), "WTARA1": (), "WTPTA1": (), "WTTQA1": ("Tflag",), "REGCV1": (), "REGCV2": ()}
 """The integer ICONs of each record (REPCA1's CKT is a circuit identifier, kept as text)."""
 
 _REECB1_PARAMS = ("remote_bus", "pfflag", "vflag", "qflag", "pqflag", "vdip_pu", "vup_pu", "t_rv_s",
@@ -1524,6 +1532,8 @@ IBR_PARAMETERS: dict[str, dict[str, str]] = {
                         "r_theta_max_deg_s", "r_theta_min_deg_s"), IBR_FIELDS["WTPTA1"])),
     "WTTQA1": dict(zip(("tflag", "kpp", "kip", "t_p_s", "t_wref_s", "te_max_pu", "te_min_pu", "trate_mw"),
                        ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", "TRATE"))),
+    "REGCV1": {f: c for c, f in REGCV1_FIELDS.items() if c in IBR_FIELDS["REGCV1"]},
+    "REGCV2": {f: c for c, f in REGCV1_FIELDS.items() if c in IBR_FIELDS["REGCV2"]},
 }
 """Field -> PSS/E name of each model (for the record messages and a written-back record)."""
 
@@ -1652,6 +1662,8 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
         kwargs.update(table_p_pu=[p for p, _ in points], table_w_pu=[w for _, w in points])
     if name == "REPCA1":
         kwargs["branch"] = (int(values["FROM"]), int(values["TO"]))
+    if name in ("REGCV1", "REGCV2"):
+        kwargs["inner"] = "lag" if name == "REGCV2" else "pi"
     try:
         return IBR_MODELS[name](**kwargs)
     except ValueError as err:  # name the CONs as the record does
