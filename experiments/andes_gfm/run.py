@@ -4,6 +4,11 @@ terminal recordings (``generate.py``), two ways, with 95 % intervals and verdict
 * ``estimator``: the machine estimator (``jd.assess_units``: identification, replay, verdict)
   with the virtual rotor as a classical machine (``jd.classical_plant``: xd = xq = x'd, Tm =
   Pref - kw dw);
+* ``fleet``: ``jaxdse fleet`` (``jaxdse.fleet``) on the case with the converter's .dyr record
+  (REGCV1 under ANDES's name, M planted at ``FLEET_M_FACTOR`` times the truth, so that the fit
+  must move) and each noisy recording as a PMU CSV at the terminal; its fleet.json H, interval
+  and verdict (the product's path: record reader, playback fit, verdict); also REGCV2 on its
+  line trip (``regcv2/``);
 * ``playback``: the converter's own model played back with the recorded voltage imposed and
   M, D fitted to the recorded P and Q (``jd.calibrate`` on ``jd.GfmUnit``), the other constants
   from the record. Its verdict here: ``identified`` when the fit converged and H's 95 % interval
@@ -18,8 +23,10 @@ The recordings are noise-free; each gets PMU noise as the ANDES bench's (``run.p
 
 import argparse
 import gzip
+import io
 import json
 import sys
+import tempfile
 import time
 import zlib
 from pathlib import Path
@@ -46,8 +53,8 @@ def constants() -> dict:
     return json.loads((HERE / "truth.json").read_text())["constants"]
 
 
-def read(event: str, tag: str):
-    with gzip.open(HERE / f"{event}.csv.gz", "rt") as fh:
+def read(event: str, tag: str, folder: Path = HERE):
+    with gzip.open(folder / f"{event}.csv.gz", "rt") as fh:
         header = fh.readline().strip().split(",")
         body = np.loadtxt(fh, delimiter=",")
     col = {name: body[:, k] for k, name in enumerate(header)}
@@ -95,6 +102,38 @@ def by_playback(event, series, unit, truth):
                rms_pq_pu=[float(x) for x in cal.rms_after_pu])
 
 
+FLEET_M_FACTOR = 1.3
+"""The record's M in the fleet runs, times the truth."""
+CASE = HERE.parent / "andes_bench" / "data" / "ieee14"
+
+
+def by_fleet(event, t, v, i, f, meta, truth, tmp: Path):
+    """``jaxdse fleet`` on the bench case with the converter's record and the noisy recording."""
+    # (REGCV2's record keeps REGCV1's Tc, which it does not use: ANDES's default)
+    c = {"Tc": 0.01, **meta["constants"], "M": FLEET_M_FACTOR * meta["constants"]["M"]}
+    model = meta["model"]
+    (tmp / "case.raw").write_text((CASE / "ieee14.raw").read_text())
+    (tmp / "case.dyr").write_text(f"8 '{model}' '1' {' '.join(f'{c[k]:g}' for k in jd.IBR_FIELDS[model])} /\n")
+    tag = meta["tag"]
+    cols = {"time_s": t, f"{tag}/F": f, f"{tag}/VM": np.abs(v), f"{tag}/VA": np.degrees(np.angle(v)),
+            f"{tag}/IM": np.abs(i), f"{tag}/IA": np.degrees(np.angle(i))}
+    np.savetxt(tmp / "rec.csv", np.column_stack(list(cols.values())), delimiter=",",
+               header=",".join(cols), comments="", fmt="%.10g")
+    (tmp / "fleet.toml").write_text(
+        '[case]\nraw = "case.raw"\ndyr = "case.dyr"\n\n[measurement]\nfile = "rec.csv"\n'
+        'location = "terminal"\nvoltage_unit = "pu"\ncurrent_unit = "pu"\nangle_unit = "deg"\n'
+        's_base_mva = 100.0\nmin_segment_s = 5.0\n\n[playback]\nmodel = "dyr"\n\n[[unit]]\nname = "B8_VSG"\nbus = 8\n'
+        + "columns = {" + ", ".join(f'{k} = "{tag}/{x}"' for k, x in (("frequency", "F"), ("v_mag", "VM"),
+                                                                        ("v_ang", "VA"), ("i_mag", "IM"),
+                                                                        ("i_ang", "IA")))
+        + ', time = "time_s"}\n')
+    (e,) = jd.fleet(tmp / "fleet.toml", tmp / "out", stream=io.StringIO())
+    lo, hi = e["H_ci95"]
+    return row("fleet", event if model == "REGCV1" else f"{event} ({model})", truth, e["H_s"], lo, hi,
+               e["verdict"], list(e["reasons"].values()), d=e["D"], d_ci=e["D_ci95"],
+               H_record_s=e["H_reference_s"])
+
+
 def row(method, event, truth, h, lo, hi, word, reasons, d, d_ci, **extra):
     h_true, d_true = truth["H_s"], truth["D_pu"]
     r = {"method": method, "event": event, "H_true_s": h_true, "H_s": h, "H_ci95": [lo, hi],
@@ -113,7 +152,7 @@ def main():
     ap.add_argument("--x-internal", type=float, default=None,
                     help="reactance of the classical machine [pu] (default: the converter's xs)")
     ap.add_argument("--events", nargs="*", default=list(EVENTS))
-    ap.add_argument("--methods", nargs="*", default=["estimator", "playback"])
+    ap.add_argument("--methods", nargs="*", default=["estimator", "playback", "fleet"])
     args = ap.parse_args()
     t0 = time.perf_counter()
     meta = json.loads((HERE / "truth.json").read_text())
@@ -133,6 +172,16 @@ def main():
             series = jd.TerminalSeries(jnp.asarray(t), jnp.abs(v), jnp.unwrap(jnp.angle(v)),
                                        jnp.real(i), jnp.imag(i))
             rows.append(by_playback(event, series, jd.GfmUnit(conv), truth))
+        if "fleet" in args.methods:
+            with tempfile.TemporaryDirectory() as d:
+                rows.append(by_fleet(event, t, v, i, f, meta, truth, Path(d)))
+    if "fleet" in args.methods and "line_trip" in args.events:   # REGCV2, on its line trip
+        meta2 = json.loads((HERE / "regcv2" / "truth.json").read_text())
+        t, v, i, f = read("line_trip", meta2["tag"], HERE / "regcv2")
+        v, i, f = noisy(t, v, i, f, seed=zlib.crc32(b"gfm/regcv2/line_trip"))
+        truth2 = {"H_s": meta2["H_s"], "D_pu": meta2["D_pu"], "omega_s": 2 * np.pi * meta2["f0_hz"]}
+        with tempfile.TemporaryDirectory() as d:
+            rows.append(by_fleet("line_trip", t, v, i, f, meta2, truth2, Path(d)))
     if "estimator" in args.methods:
         rows = by_estimator(units, truth) + rows
     path = HERE / "results.json"
@@ -140,7 +189,8 @@ def main():
         done = {(r["method"], r["event"]) for r in rows}
         rows = [r for r in json.loads(path.read_text())["units"]
                 if (r["method"], r["event"]) not in done] + rows
-        rows.sort(key=lambda r: (r["method"] != "estimator", EVENTS.index(r["event"])))
+        rows.sort(key=lambda r: (("estimator", "playback", "fleet").index(r["method"]),
+                                 EVENTS.index(r["event"].split(" ")[0])))
     out = {"noise": {"tve_percent": TVE_PERCENT, "f_noise_hz": F_NOISE_HZ},
            "x_internal_pu": args.x_internal if args.x_internal is not None else meta["constants"]["xs"],
            "tolerance": TOLERANCE, "units": rows, "wall_s": time.perf_counter() - t0}

@@ -112,10 +112,11 @@ def _program(folder: Path, name: str, fn: Callable, treedef, static, leaves) -> 
         flat.__name__ = flat.__qualname__ = name   # the program's name in JAX's logs
 
         program = export.export(jax.jit(flat))(*(jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves))
+        data = program.serialize()   # (before the file: a program that cannot take leaves none)
         folder.mkdir(parents=True, exist_ok=True)
         fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
         with os.fdopen(fd, "wb") as fh:
-            fh.write(program.serialize())
+            fh.write(data)
         os.chmod(tmp, 0o644)   # as JAX's cache entries (mkstemp makes it private)
         os.replace(tmp, path)
     with _LOCK:
