@@ -646,13 +646,18 @@ def ibr_figure(e: dict, tr: dict, path: Path) -> list[str]:
             a.tick_params(labelsize=7)
     axes[-1].set_xlabel("time [s]")
     val = e["validation"]
-    fig.suptitle(f"{e['name']}: inverter-based plant, P against frequency and Q against voltage "
+    fig.suptitle(f"{e['name']}: {_kind(e)}, P against frequency and Q against voltage "
                  f"(model validation: {val['result']})", fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     labels = [a.get_ylabel() for a in fig.axes] + [axes[-1].get_xlabel()]
     plt.close(fig)
     return labels
+
+
+def _kind(e: dict) -> str:
+    """What the plant is, in the page's and the figure's titles."""
+    return "grid-forming converter" if e.get("plant_type") == "grid-forming" else "inverter-based plant"
 
 
 def _virtual_inertia(e: dict) -> str:
@@ -699,7 +704,7 @@ def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
            'played back, with residuals">') if figures else ""
     body = f"""
 <p><a href="../report.html">← fleet</a></p>
-<h1>{name}: inverter-based plant · model validation {_vbadge(e)}</h1>
+<h1>{name}: {_kind(e)} · model validation {_vbadge(e)}</h1>
 <p>Bus {e['bus']} ({e['bus_kv']:g} kV), {e['s_mva']:.0f} MVA, {len(e['units'])} unit(s); PMU at the
 {'plant terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
 {repairs_box(e.get("repairs") or [])}
@@ -723,4 +728,4 @@ Q {_f(rms['Q_t'], '.3g')} % of MBASE.{f' Not played back: {html.escape(fb)}' if 
 <h2>Provenance</h2><p class="small">jaxdse {html.escape(doc['jaxdse_version'])}; fleet file
 {html.escape(doc['config']['file'])} (sha256 {doc['config']['sha256']})</p>
 """
-    return _page(f"{e['name']}: inverter-based plant, model validation {val['result']}", body)
+    return _page(f"{e['name']}: {_kind(e)}, model validation {val['result']}", body)
