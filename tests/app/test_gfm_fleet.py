@@ -88,3 +88,28 @@ def test_fleet_identifies_the_virtual_inertia(tmp_path, factor):
     assert e["D_ci95"][0] <= META["D_pu"] + 0.1 and META["D_pu"] - 0.1 <= e["D_ci95"][1]
     page = (tmp_path / "out" / "units" / "B8_VSG.html").read_text()
     assert "virtual inertia H = M/2" in page and "the record&#x27;s D, not a lumped damping" in page
+
+
+def test_several_converters_behind_one_pmu_are_said_not_fitted():
+    """Two grid-forming converters on one bus: their shares are not measured, so no virtual H is
+    fitted, and fleet.json and the page say why (never the grid-following "no rotor")."""
+    import numpy as np
+
+    from jaxdse._app.dyr_fleet import DyrOutcome, PlantModel, PlantPlayback
+    from jaxdse._app.fleet_gfm import unfitted
+    from jaxdse._app.fleet_report import ibr_unit_page
+    from jaxdse._dyr.records import IbrModel
+
+    one = IbrModel(GfmUnit(jd.gfm_from_andes("REGCV1", META["constants"])), {"converter": "REGCV1"})
+    pb = PlantPlayback(np.zeros(3), np.zeros(3), np.zeros(3), True)
+    assert unfitted(DyrOutcome(PlantModel([one], np.ones(1), np.ones(1), np.ones(1)), pb)) is None
+    two = DyrOutcome(PlantModel([one, one], np.ones(2), np.ones(2) / 2, np.ones(2) / 2), pb)
+    fields = unfitted(two)
+    assert fields["plant_type"] == "grid-forming" and fields["verdict"] == "not identified"
+    assert "2 grid-forming converter(s) among 2 units" in fields["reasons"]["several_units"]
+    e = {"name": "B8", "bus": 8, "bus_kv": 1.0, "s_mva": 200.0, "units": [], "location": "terminal",
+         "validation": {"result": "not judged", "reasons": [], "windows": None, "scope": "P/f, Q/V",
+                        "model": "dyr"},
+         "playback_rms_percent_mbase": {"P_t": None, "Q_t": None}, **fields}
+    page = ibr_unit_page(e, {"jaxdse_version": "x", "config": {"file": "f", "sha256": "0"}}, False)
+    assert "shares of P and Q are not measured" in page and "no rotor" not in page

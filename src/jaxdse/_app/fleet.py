@@ -37,7 +37,7 @@ from .._many.runner import Unit, assess_units, bucket, planned_calls
 from .._version import __version__
 from .dyr_fleet import SIMULATED_RECORDS, DyrOutcome, plant_model, play_back_plants, terminal_series
 from .fleet_file import Fleet, FleetPlant, load_fleet
-from .fleet_gfm import is_grid_forming, virtual_inertia
+from .fleet_gfm import is_grid_forming, unfitted, virtual_inertia
 from .fleet_inertia import fleet_inertia, inertia_document, inertia_figure, write_inertia_csv
 from .fleet_plants import NO_ROTOR
 from .fleet_report import write_report
@@ -114,6 +114,8 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
                 progress.note(f"jaxdse: {p.name}: a grid-forming converter: fitting its virtual "
                               "inertia M = 2H and damping D to the recording")
                 entry.update(gfm_entry(virtual_inertia(a, dyr, fleet.playback.settings, fleet.calibrate)))
+            elif (several := unfitted(dyr)) is not None:
+                entry.update(several)
             done[name] = (tr, entry)
         else:
             done[name] = (_traces(a.estimate, a.replay, dyr), fleet_entry(p, a, quality, fleet.criteria, dyr))

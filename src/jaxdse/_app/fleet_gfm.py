@@ -37,6 +37,21 @@ def is_grid_forming(dyr: DyrOutcome | None) -> bool:
             and isinstance(dyr.model.units[0].unit, GfmUnit))
 
 
+def unfitted(dyr: DyrOutcome | None) -> dict | None:
+    """The H fields of a plant with grid-forming converters whose virtual inertia is not fitted
+    (several units behind one PMU: their shares of P and Q are not measured); None when the
+    plant has none or is fitted (:func:`is_grid_forming`)."""
+    if dyr is None or is_grid_forming(dyr):
+        return None
+    n = sum(isinstance(u.unit, GfmUnit) for u in dyr.model.units)
+    if n == 0:
+        return None
+    why = (f"{n} grid-forming converter(s) among {len(dyr.model.units)} units behind one PMU: their "
+           "shares of P and Q are not measured, so no virtual H is fitted")
+    return {"plant_type": "grid-forming", "verdict": "not identified", "reasons": {"several_units": why},
+            "estimator": why}
+
+
 def virtual_inertia(front, dyr: DyrOutcome, playback: PlaybackSettings, opts) -> dict:
     """H, D, their intervals and H's verdict (fleet.json's fields) of the grid-forming converter
     of ``dyr`` from the recording ``front`` (an :class:`~jaxdse._app.fleet.IbrTerminal`), ``opts``
@@ -79,4 +94,4 @@ def virtual_inertia(front, dyr: DyrOutcome, playback: PlaybackSettings, opts) ->
             "rms_after_pu": [float(x) for x in cal.rms_after_pu]}
 
 
-__all__ = ["is_grid_forming", "virtual_inertia"]
+__all__ = ["is_grid_forming", "unfitted", "virtual_inertia"]

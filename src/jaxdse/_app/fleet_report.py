@@ -709,7 +709,8 @@ def ibr_unit_page(e: dict, doc: dict, figures: bool) -> str:
 {'plant terminal' if e['location'] == 'terminal' else 'HV side of the step-up transformer'}.</p>
 {repairs_box(e.get("repairs") or [])}
 <h2>Inertia H and damping D: {_badge(e['verdict'])}</h2>
-{_virtual_inertia(e) if e.get('plant_type') == 'grid-forming' else
+{_virtual_inertia(e) if 'virtual_inertia' in e else
+ f"<p>{html.escape(e['reasons']['several_units'])}.</p>" if 'several_units' in e['reasons'] else
  f"<p>{html.escape(e['reasons'].get('no_rotor', ''))}: the swing-equation estimator does not apply.</p>"}
 <h2>Model validation: {_vbadge(e)}</h2>
 <p>{val_text}</p>{f'<ul>{val_reasons}</ul>' if val_reasons else ''}

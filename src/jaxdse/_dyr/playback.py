@@ -52,8 +52,9 @@ class PlaybackSettings(eqx.Module):
     15,796 rejected steps in one interval of a Texas 7k REGCA1/REECA1/REPCA1 plant). A fixed step
     switches at most once per step, as PSS/E's fixed step does, and converges to the sliding
     solution (that interval's end at 64 steps against 4,096: 0.03 pu in the PI's state, which the
-    limit's clip keeps from the output, 1e-5 pu in the others). Under vmap the steps are taken
-    only where a unit needs them (the fallback's loop runs 0 times otherwise)."""
+    limit's clip keeps from the output, 1e-5 pu in the others). Under vmap the fallback's loop
+    runs only in the intervals where some unit of the batch needs it, and then for the whole
+    batch."""
     init_s: float = eqx.field(static=True, default=0.5)
     """The initial steady state is the power flow averaged over the quiet stretch before the
     first event (:func:`quiet_frames`), at least this long [s]."""
@@ -340,7 +341,7 @@ def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
     m = unit.machine.n_states
     return PlaybackResult(t_s=ts, p_pu=p, q_pu=q, omega_pu=ys[:, m - 1], delta_rad=ys[:, m - 2],
                           efd_pu=efd, tm_pu=tm, references=refs, ok=ok,
-                              fixed_step_intervals=n_fixed)
+                          fixed_step_intervals=n_fixed)
 
 
 play_back = eqx.filter_jit(_play_back)
