@@ -12,6 +12,22 @@ def as_float(x):
     return jnp.asarray(x, dtype=float)
 
 
+def as_flag(x):
+    """Converter for ``eqx.field``: an integer array leaf for a switch between signal paths (a
+    PSS/E ICON such as QFLAG). The paths are chosen with ``jnp.where``, so units whose switches
+    differ have one pytree structure and share a compiled program under vmap."""
+    return jnp.asarray(x, dtype=int)
+
+
+def check_flag(module, *names: str, allowed=(0, 1)) -> None:
+    """Raise ``ValueError`` for a concrete flag field whose value is not one of ``allowed``."""
+    words = ", ".join(str(a) for a in allowed[:-1]) + f" or {allowed[-1]}"
+    for name in names:
+        value = getattr(module, name)
+        if concrete(value) and not np.all(np.isin(np.asarray(value), allowed)):
+            raise ValueError(f"{type(module).__name__}.{name} must be {words}, got {value}")
+
+
 def concrete(value) -> bool:
     """True for a value known now (not a tracer inside jit/vmap/grad): only those are validated."""
     return not isinstance(value, jax.core.Tracer)

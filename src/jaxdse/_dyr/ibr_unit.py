@@ -246,10 +246,8 @@ class IbrUnit(eqx.Module):
         if self.torque is not None:
             # PFLAG = 1: REECA1 multiplies Pref by wg, so the torque controller sends Pord0/w0
             w0 = self.torque.speed_table(p) + 0.0 * vt
-            p_ref = p_ref / w0 if self._pflag else p_ref
+            p_ref = jnp.where(self._pflag, p_ref / w0, p_ref)
             y_t, _ = self.torque.initial_state(p, p_ref)
-        elif self._pflag:
-            p_ref = p_ref / w0
         theta0 = jnp.zeros_like(vt) if self.aero is None else self.aero.theta0_deg + 0.0 * vt
         parts = [y_c, y_e]
         zero = jnp.zeros_like(vt)
@@ -272,8 +270,9 @@ class IbrUnit(eqx.Module):
                                                      iqcmd + 0.0 * vt, p_refs, wind)
 
     @property
-    def _pflag(self) -> bool:
-        return self.electrical is not None and bool(self.electrical.pflag)
+    def _pflag(self):
+        """PFLAG = 1 (a boolean array: the flag is a leaf, not part of the structure)."""
+        return jnp.asarray(False) if self.electrical is None else self.electrical.pflag != 0
 
 
 __all__ = ["IbrReferences", "IbrSignals", "IbrUnit", "WindReferences"]

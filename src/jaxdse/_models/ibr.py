@@ -8,8 +8,9 @@ Conventions (every model):
   terminal voltage (REGCA1 has no PLL): active current Ip in phase with V, reactive current
   Iq positive when the plant *injects* reactive power (capacitive), so P = |V| Ip and
   Q = |V| Iq. The current out of the terminal in the network frame is (Ip - j Iq) V/|V|;
-* flags (PSS/E ICONs: PFFLAG, VFLAG, QFLAG, PFLAG, PQFLAG, Lvplsw, VCFlag, RefFlag, Fflag) are
-  static fields, constants are array leaves; a lag with T = 0 is a pass-through whose state is
+* flags (PSS/E ICONs: PFFLAG, VFLAG, QFLAG, PFLAG, PQFLAG, Lvplsw, VCFlag, RefFlag, Fflag,
+  Tflag) are integer array leaves like the constants, and select their signal paths with
+  ``jnp.where`` (units whose flags differ share one compiled program); a lag with T = 0 is a pass-through whose state is
   kept with zero derivative (one state layout under vmap); ``jnp.where``, never Python
   branching on values; non-windup limits block the derivative that would push further;
 * the voltage-dip freeze (REECA1: |V| < Vdip or |V| > Vup) sets the derivatives of the frozen
@@ -43,7 +44,15 @@ from jaxtyping import Array, Float, Int
 from .._base.blocks import blocked as _blocked
 from .._base.blocks import lag as _lag
 from .._base.blocks import lead_lag as _lead_lag
-from .._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from .._base.fields import (
+    all_concrete,
+    as_flag,
+    as_float,
+    check_flag,
+    check_nonnegative,
+    check_positive,
+    check_that,
+)
 from .base import record_message
 
 LVPL_OPEN_PU = 9999.0
@@ -97,7 +106,7 @@ class REGCA1(eqx.Module):
     PSS/E's Norton source) has no role with the voltage imposed and is kept for the record.
     """
 
-    lvplsw: int = eqx.field(static=True, converter=int, default=1)
+    lvplsw: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """Lvplsw (ICON): 1 the LVPL limit on Ip is active, 0 not."""
     t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
     """Tg: converter time constant [s] (>= 0; 0: the converter's own lag bypassed, realised as
@@ -140,17 +149,15 @@ class REGCA1(eqx.Module):
             check_that(self, self.iolim_pu <= 0, f"Iolim must be <= 0, got {self.iolim_pu}")
             check_that(self, self.lvpnt1_pu > self.lvpnt0_pu,
                        f"Lvpnt1 ({self.lvpnt1_pu}) must be > Lvpnt0 ({self.lvpnt0_pu})")
-            if self.lvplsw:
-                check_that(self, self.brkpt_pu > self.zerox_pu,
+            check_that(self, (self.lvplsw == 0) | (self.brkpt_pu > self.zerox_pu),
                            f"Brkpt ({self.brkpt_pu}) must be > Zerox ({self.zerox_pu})")
 
     def lvpl(self, vf):
         """The LVPL ceiling on Ip at filtered voltage ``vf`` [pu] (open when Lvplsw = 0)."""
-        if not self.lvplsw:
-            return jnp.full_like(vf, LVPL_OPEN_PU)
         span = jnp.where(self.brkpt_pu > self.zerox_pu, self.brkpt_pu - self.zerox_pu, 1.0)
         ramp = self.lvpl1_pu * (vf - self.zerox_pu) / span
-        return jnp.where(vf < self.zerox_pu, 0.0, jnp.where(vf < self.brkpt_pu, ramp, LVPL_OPEN_PU))
+        lvpl = jnp.where(vf < self.zerox_pu, 0.0, jnp.where(vf < self.brkpt_pu, ramp, LVPL_OPEN_PU))
+        return jnp.where(self.lvplsw != 0, lvpl, LVPL_OPEN_PU)
 
     def lvacm(self, vt):
         """The low-voltage active current management gain G(|V|) [-]."""
@@ -207,9 +214,9 @@ class REGCB1(eqx.Module):
     back into E). No LVPL, LVACM or HVRCM (REGC_B has none).
     """
 
-    rateflag: int = eqx.field(static=True, converter=int, default=0)
+    rateflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """RateFlag (ICON): 0 the Rrpwr rate acts on the active current, 1 on the active power."""
-    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    pqflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PQFlag (ICON): current limit priority, 0 reactive, 1 active."""
     t_g_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
     """Tg: current control time constant [s] (> 0)."""
@@ -233,9 +240,7 @@ class REGCB1(eqx.Module):
     n_states = 5
 
     def __check_init__(self):
-        for name in ("rateflag", "pqflag"):
-            if getattr(self, name) not in (0, 1):
-                raise ValueError(f"REGCB1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_flag(self, "rateflag", "pqflag")
         check_positive(self, "t_g_s", "rrpwr_pu_s", "iqrmax_pu_s", "i_max_pu")
         check_nonnegative(self, "t_fltr_s", "t_e_s")
         if all_concrete(self.iqrmin_pu_s):
@@ -250,17 +255,17 @@ class REGCB1(eqx.Module):
     def _currents(self, state):
         """(Ip, Iq) of the current control lags [pu]."""
         vf = jnp.maximum(state[2], V_FLOOR_PU)
-        ip = state[0] / vf if self.rateflag else state[0]
+        ip = jnp.where(self.rateflag != 0, state[0] / vf, state[0])
         return ip, state[1]
 
     def limit(self, ipcmd, iqcmd):
         """(Ipc, Iqc): the commands within Imax, by PQFlag's priority."""
         room = lambda x: jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - x ** 2, 0.0))  # noqa: E731
-        if self.pqflag:
-            ipc = jnp.clip(ipcmd, -self.i_max_pu, self.i_max_pu)
-            return ipc, jnp.clip(iqcmd, -room(ipc), room(ipc))
-        iqc = jnp.clip(iqcmd, -self.i_max_pu, self.i_max_pu)
-        return jnp.clip(ipcmd, -room(iqc), room(iqc)), iqc
+        ip_first = jnp.clip(ipcmd, -self.i_max_pu, self.i_max_pu)
+        iq_first = jnp.clip(iqcmd, -self.i_max_pu, self.i_max_pu)
+        p_pri = self.pqflag != 0
+        return (jnp.where(p_pri, ip_first, jnp.clip(ipcmd, -room(iq_first), room(iq_first))),
+                jnp.where(p_pri, jnp.clip(iqcmd, -room(ip_first), room(ip_first)), iq_first))
 
     def injection(self, state, vt):
         """(Ip_inj, Iq_inj) [pu current]: the currents the converter injects at |V| = ``vt``."""
@@ -273,7 +278,7 @@ class REGCB1(eqx.Module):
         """d[Ip, Iq, Vf, Ed, Eq]/dt at |V| = ``vt`` [pu] with the commands Ipcmd, Iqcmd [pu]."""
         ipc, iqc = self.limit(ipcmd, iqcmd)
         vf = jnp.maximum(state[2], V_FLOOR_PU)
-        target = ipc * vf if self.rateflag else ipc
+        target = jnp.where(self.rateflag != 0, ipc * vf, ipc)
         d_ip = (target - state[0]) / self.t_g_s
         d_ip = jnp.where(target >= 0, jnp.minimum(d_ip, self.rrpwr_pu_s), jnp.maximum(d_ip, -self.rrpwr_pu_s))
         d_iq = jnp.clip((iqc - state[1]) / self.t_g_s, self.iqrmin_pu_s, self.iqrmax_pu_s)
@@ -293,7 +298,7 @@ class REGCB1(eqx.Module):
         ip, iq = p / vt, q / vt
         _, z = self._source()
         e = vt + z * (ip - 1j * iq)
-        x_p = ip * vt if self.rateflag else ip
+        x_p = jnp.where(self.rateflag != 0, ip * vt, ip)
         return jnp.stack([x_p, iq, vt + 0.0 * ip, e.real, e.imag]), ip, iq
 
 
@@ -358,30 +363,30 @@ class _ElectricalControls(eqx.Module):
         v_safe = jnp.maximum(vm, V_FLOOR_PU)
         iqv = jnp.clip(self.kqv * deadband(refs.v_ref0_pu - vm, self.dbd1_pu, self.dbd2_pu),
                        self.iql1_pu, self.iqh1_pu)
-        q_ref = pm * jnp.tan(refs.pfaref_rad) if self.pfflag else u.q_ext_pu
+        q_ref = jnp.where(self.pfflag != 0, pm * jnp.tan(refs.pfaref_rad), u.q_ext_pu)
         q_c = jnp.clip(q_ref, self.q_min_pu, self.q_max_pu)
         e_q = q_c - u.q_pu
         vq_raw = self.kqp * e_q + x_q
         vq = jnp.clip(vq_raw, self.v_min_pu, self.v_max_pu)
-        v_sel = vq if self.vflag else self._v_alt(q_c, refs)
+        v_sel = jnp.where(self.vflag != 0, vq, self._v_alt(q_c, refs))
         e_v = v_sel - vm
         iv0, _ = _lag(q_c / v_safe, x_iq, self.t_iq_s)
         p_lo, p_hi = self._p_limits(state)
         pord_out = jnp.clip(jnp.where(self.t_pord_s > 0, pord, self._p_in(u)), p_lo, p_hi)
         ip_raw = pord_out / v_safe
         vdl1, vdl2 = self._tables(vm)
-        if self.pqflag:
-            ip_max = jnp.minimum(vdl2, self.i_max_pu)
-            ipcmd = jnp.clip(ip_raw, self._ip_floor(ip_max), ip_max)
-            iq_max = jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd ** 2, 1e-12)))
-        else:
-            iq_max = jnp.minimum(vdl1, self.i_max_pu)
+        # PQFLAG = 1, active current first: Ipcmd within its ceiling, Iq within what is left
+        p_pri = self.pqflag != 0
+        ip_max_p = jnp.minimum(vdl2, self.i_max_pu)
+        ipcmd_p = jnp.clip(ip_raw, self._ip_floor(ip_max_p), ip_max_p)
+        iq_max = jnp.where(p_pri, jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd_p ** 2, 1e-12))),
+                           jnp.minimum(vdl1, self.i_max_pu))
         iqb_raw = self.kvp * e_v + x_v
         iqb = jnp.clip(iqb_raw, -iq_max, iq_max)
-        iqcmd = jnp.clip((iqb if self.qflag else iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
-        if not self.pqflag:
-            ip_max = jnp.minimum(vdl2, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - iqcmd ** 2, 1e-12)))
-            ipcmd = jnp.clip(ip_raw, self._ip_floor(ip_max), ip_max)
+        iqcmd = jnp.clip(jnp.where(self.qflag != 0, iqb, iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
+        # PQFLAG = 0, reactive current first: Ip within what Iqcmd leaves
+        ip_max_q = jnp.minimum(vdl2, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - iqcmd ** 2, 1e-12)))
+        ipcmd = jnp.where(p_pri, ipcmd_p, jnp.clip(ip_raw, self._ip_floor(ip_max_q), ip_max_q))
         return ipcmd, iqcmd, dip, (q_c, e_q, vq_raw, e_v, iqb_raw, iq_max)
 
     def vector_field(self, state, u: ElectricalInputs, refs: ElectricalReferences):
@@ -400,8 +405,8 @@ class _ElectricalControls(eqx.Module):
         d_p = jnp.clip((self._p_in(u) - pord) / jnp.where(on, self.t_pord_s, 1.0),
                        self.dp_min_pu_s, self.dp_max_pu_s)
         d_p = jnp.where(on, _blocked(pord, d_p, p_lo, p_hi), 0.0)
-        if not self.qflag:
-            d_q, d_v = d_q * 0.0, d_v * 0.0      # the PI loops are not in the signal path
+        loops = self.qflag != 0                  # QFLAG = 0: the PI loops are not in the signal path
+        d_q, d_v = jnp.where(loops, d_q, 0.0), jnp.where(loops, d_v, 0.0)
         return jnp.stack([d_vm, d_pm, d_q, d_v, run * d_iq, run * d_p, *self._extra(state, u)])
 
     def _extra_state(self, vt):
@@ -413,7 +418,7 @@ class _ElectricalControls(eqx.Module):
         (Pref, and Qext for PFFLAG = 0) that hold it. Assumes no limit active, no dip."""
         vt = jnp.asarray(vt, float)
         v_ref0 = jnp.where(self.v_ref0_pu == 0.0, vt, self.v_ref0_pu)
-        pfaref = jnp.arctan2(q, p) if self.pfflag else jnp.zeros_like(vt)
+        pfaref = jnp.where(self.pfflag != 0, jnp.arctan2(q, p), 0.0) + 0.0 * vt
         p_ref = ipcmd * vt                      # Pord = Ipcmd Vm: the order that gives Ipcmd
         q_ext = q
         q_c = jnp.clip(q, self.q_min_pu, self.q_max_pu)
@@ -453,15 +458,15 @@ class REECA1(_ElectricalControls):
     voltage is the terminal's (the remote regulated bus ICON is recorded, not used).
     """
 
-    pfflag: int = eqx.field(static=True, converter=int, default=0)
+    pfflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PFFLAG: 1 constant power factor (Qref = Pe tan(pfaref)), 0 Q from Qext."""
-    vflag: int = eqx.field(static=True, converter=int, default=1)
+    vflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """VFLAG: 1 Q control (the PI_Q output is the voltage loop's reference), 0 voltage control."""
-    qflag: int = eqx.field(static=True, converter=int, default=0)
+    qflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """QFLAG: 1 voltage/Q control through the PI loops, 0 constant Q (Iq = Qref/V)."""
-    pflag: int = eqx.field(static=True, converter=int, default=0)
+    pflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PFLAG: 1 Pref multiplied by the generator speed, 0 not."""
-    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    pqflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PQFLAG: current limit priority, 0 reactive, 1 active."""
     remote_bus: Int[Array, ""] = eqx.field(converter=_as_bus, default=0)
     """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal. An array leaf:
@@ -536,9 +541,7 @@ class REECA1(_ElectricalControls):
     n_states = 6
 
     def __check_init__(self):
-        for name in ("pfflag", "vflag", "qflag", "pflag", "pqflag"):
-            if getattr(self, name) not in (0, 1):
-                raise ValueError(f"REECA1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_flag(self, "pfflag", "vflag", "qflag", "pflag", "pqflag")
         check_positive(self, "dp_max_pu_s", "i_max_pu")
         check_nonnegative(self, "t_rv_s", "t_p_s", "t_iq_s", "t_pord_s", "kqi", "kvi",
                           "vdl1_i_pu", "vdl2_i_pu")
@@ -571,7 +574,7 @@ class REECA1(_ElectricalControls):
         return jnp.clip(jnp.where(self.t_pord_s > 0, state[5], self._p_in(u)), self.p_min_pu, self.p_max_pu)
 
     def _p_in(self, u: ElectricalInputs):
-        return u.p_ref_pu * u.speed_pu if self.pflag else u.p_ref_pu
+        return jnp.where(self.pflag != 0, u.p_ref_pu * u.speed_pu, u.p_ref_pu)
 
     def _v_ref1(self, vt, q_c):
         return vt - q_c                         # VFLAG = 0: Vsel = Qc + Vref1 = Vm
@@ -596,13 +599,13 @@ class REECB1(_ElectricalControls):
     record's Vref0 that differs from it would move the start (the plant notes say so).
     """
 
-    pfflag: int = eqx.field(static=True, converter=int, default=0)
+    pfflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PFFLAG: 1 constant power factor (Qref = Pe tan(pfaref)), 0 Q from Qext."""
-    vflag: int = eqx.field(static=True, converter=int, default=1)
+    vflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """VFLAG: 1 Q control (the PI_Q output is the voltage loop's reference), 0 voltage control."""
-    qflag: int = eqx.field(static=True, converter=int, default=0)
+    qflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """QFLAG: 1 voltage/Q control through the PI loops, 0 constant Q (Iq = Qref/V)."""
-    pqflag: int = eqx.field(static=True, converter=int, default=0)
+    pqflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """PQFLAG: current limit priority, 0 reactive, 1 active."""
     remote_bus: Int[Array, ""] = eqx.field(converter=_as_bus, default=0)
     """Regulated bus ICON (0: terminal); a nonzero one is taken at the terminal. An array leaf:
@@ -663,10 +666,7 @@ class REECB1(_ElectricalControls):
     """No speed input (REEC_B): Pref reaches the power order as it is."""
 
     def __check_init__(self):
-        name = type(self).__name__
-        for flag in ("pfflag", "vflag", "qflag", "pqflag"):
-            if getattr(self, flag) not in (0, 1):
-                raise ValueError(f"{name}.{flag} must be 0 or 1, got {getattr(self, flag)}")
+        check_flag(self, "pfflag", "vflag", "qflag", "pqflag")
         check_positive(self, "dp_max_pu_s", "i_max_pu")
         check_nonnegative(self, "t_rv_s", "t_p_s", "t_iq_s", "t_pord_s", "kqi", "kvi")
         if all_concrete(self.vdip_pu, self.vup_pu, self.dbd1_pu, self.dbd2_pu, self.q_max_pu,
@@ -810,11 +810,11 @@ class REPCA1(eqx.Module):
     unit's own output (recorded in ``regulated_bus`` and ``branch``, not used).
     """
 
-    vcflag: int = eqx.field(static=True, converter=int, default=1)
+    vcflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """VCFlag: 1 line drop compensation (Rc, Xc), 0 reactive droop (Kc)."""
-    refflag: int = eqx.field(static=True, converter=int, default=1)
+    refflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """RefFlag: 1 voltage control, 0 reactive power control."""
-    fflag: int = eqx.field(static=True, converter=int, default=1)
+    fflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """Fflag: 1 active power control with frequency droop, 0 Pref held."""
     regulated_bus: Int[Array, ""] = eqx.field(converter=_as_bus, default=0)
     """IREG ICON: the regulated bus (0: terminal); taken at the terminal. An array leaf, not a
@@ -879,9 +879,7 @@ class REPCA1(eqx.Module):
     n_states = 7
 
     def __check_init__(self):
-        for name in ("vcflag", "refflag", "fflag"):
-            if getattr(self, name) not in (0, 1):
-                raise ValueError(f"REPCA1.{name} must be 0 or 1, got {getattr(self, name)}")
+        check_flag(self, "vcflag", "refflag", "fflag")
         check_nonnegative(self, "t_fltr_s", "t_ft_s", "t_fv_s", "ki", "kig", "t_p_s", "t_g_s",
                           "ddn_pu", "dup_pu")
         if all_concrete(self.e_max_pu, self.q_max_pu, self.p_max_pu, self.fe_max_pu,
@@ -901,16 +899,15 @@ class REPCA1(eqx.Module):
 
     def compensated_voltage(self, u: PlantInputs):
         """Vc [pu]: line drop compensation (VCFlag = 1) or reactive droop (VCFlag = 0)."""
-        if self.vcflag:
-            d_re = u.v_re_pu - (self.rc_pu * u.i_re_pu - self.xc_pu * u.i_im_pu)
-            d_im = u.v_im_pu - (self.rc_pu * u.i_im_pu + self.xc_pu * u.i_re_pu)
-            return jnp.hypot(d_re, d_im)
-        return jnp.hypot(u.v_re_pu, u.v_im_pu) + self.kc * u.q_pu
+        d_re = u.v_re_pu - (self.rc_pu * u.i_re_pu - self.xc_pu * u.i_im_pu)
+        d_im = u.v_im_pu - (self.rc_pu * u.i_im_pu + self.xc_pu * u.i_re_pu)
+        return jnp.where(self.vcflag != 0, jnp.hypot(d_re, d_im),
+                         jnp.hypot(u.v_re_pu, u.v_im_pu) + self.kc * u.q_pu)
 
     def _internals(self, state, u: PlantInputs, refs: PlantReferences):
         vf, _ = _lag(self.compensated_voltage(u), state[0], self.t_fltr_s)
         qf, _ = _lag(u.q_pu, state[1], self.t_fltr_s)
-        err = refs.v_ref_pu - vf if self.refflag else refs.q_ref_pu - qf
+        err = jnp.where(self.refflag != 0, refs.v_ref_pu - vf, refs.q_ref_pu - qf)
         e = jnp.clip(deadband(err, self.dbd1_pu, self.dbd2_pu), self.e_min_pu, self.e_max_pu)
         q_raw = self.kp * e + state[2]
         q_pi = jnp.clip(q_raw, self.q_min_pu, self.q_max_pu)
@@ -927,7 +924,7 @@ class REPCA1(eqx.Module):
         _, _, q_pi, _, _, p_pi = self._internals(state, u, refs)
         q_ext, _ = _lead_lag(q_pi, state[3], self.t_ft_s, self.t_fv_s)
         p_ref, _ = _lag(p_pi, state[6], self.t_g_s)
-        return (p_ref if self.fflag else refs.p_ref_pu + 0.0 * p_ref), q_ext
+        return jnp.where(self.fflag != 0, p_ref, refs.p_ref_pu + 0.0 * p_ref), q_ext
 
     def vector_field(self, state, u: PlantInputs, refs: PlantReferences):
         """d(state)/dt."""
@@ -940,8 +937,7 @@ class REPCA1(eqx.Module):
         _, d_pf = _lag(u.p_pu, state[4], self.t_p_s)
         d_xp = _blocked(p_raw, self.kig * ep, self.p_min_pu, self.p_max_pu)
         _, d_lag = _lag(p_pi, state[6], self.t_g_s)
-        if not self.fflag:
-            d_pf, d_xp, d_lag = d_pf * 0.0, d_xp * 0.0, d_lag * 0.0
+        d_pf, d_xp, d_lag = (jnp.where(self.fflag != 0, d, 0.0) for d in (d_pf, d_xp, d_lag))
         return jnp.stack([d_vf, d_qf, d_xq, d_ll, d_pf, d_xp, d_lag])
 
     def initial_state(self, u: PlantInputs, p_ref, q_ext):
@@ -1148,7 +1144,7 @@ class WTTQA1(eqx.Module):
     power). TRATE (the turbine rating, 0: MBASE) must be 0.
     """
 
-    tflag: int = eqx.field(static=True, converter=int, default=1)
+    tflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """Tflag (ICON): 1 speed control, 0 power (torque) control, 2 power control with the torque
     ceiling Pref0/wg (PowerWorld WebHelp "WTGTRQ_A": "2=Alternative with Pref0 feeding to Temax
     value")."""
@@ -1174,8 +1170,7 @@ class WTTQA1(eqx.Module):
     n_states = 3
 
     def __check_init__(self):
-        if self.tflag not in (0, 1, 2):
-            raise ValueError(f"WTTQA1.tflag must be 0, 1 or 2, got {self.tflag}")
+        check_flag(self, "tflag", allowed=(0, 1, 2))
         check_nonnegative(self, "kip", "t_p_s", "t_wref_s")
         check_positive(self, "table_w_pu")
         if all_concrete(self.te_max_pu, self.te_min_pu, self.table_p_pu, self.trate_mw):
@@ -1194,12 +1189,12 @@ class WTTQA1(eqx.Module):
     def _internals(self, state, p_elec, wg, p_ref0):
         pm, _ = _lag(p_elec, state[0], self.t_p_s)
         w_ref, _ = _lag(self.speed_table(pm), state[1], self.t_wref_s)
-        e_t = wg - w_ref if self.tflag == 1 else (p_ref0 - pm) / jnp.maximum(wg, 0.01)
+        e_t = jnp.where(self.tflag == 1, wg - w_ref, (p_ref0 - pm) / jnp.maximum(wg, 0.01))
         raw = self.kpp * e_t + state[2]
         return pm, w_ref, e_t, raw
 
     def _ceiling(self, wg, p_ref0):
-        return p_ref0 / jnp.maximum(wg, 0.01) if self.tflag == 2 else self.te_max_pu
+        return jnp.where(self.tflag == 2, p_ref0 / jnp.maximum(wg, 0.01), self.te_max_pu)
 
     def outputs(self, state, p_elec, wg, p_ref0):
         """(Pref to REECA1 [pu], wref [pu])."""
