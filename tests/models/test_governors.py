@@ -254,7 +254,7 @@ def params_ggov1(g):
                  Ropen="r_open_pu_s", Rclose="r_close_pu_s", Aset="aset_pu_s", Ka="ka", Ta="t_a_s",
                  Tsa="t_sa_s", Tsb="t_sb_s", DELT="delt_s")
     out = {k: float(getattr(g, v)) for k, v in names.items()}
-    out.update(Rselect=g.rselect, Flag=g.flag)
+    out.update(Rselect=int(g.rselect), Flag=int(g.flag))
     return out
 
 
@@ -502,7 +502,7 @@ def _loss(g):
     return g.torque(x, -0.002)
 
 
-_jit_value_and_grad = jax.jit(jax.value_and_grad(_loss))
+_jit_value_and_grad = eqx.filter_jit(eqx.filter_value_and_grad(_loss))
 """Compiled once per model structure (the parameters are traced leaves)."""
 
 

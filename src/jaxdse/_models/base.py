@@ -6,7 +6,9 @@ Conventions (all models):
 * the network frame rotates at nominal speed; a phasor ``v = v_re + j v_im`` is a pair of reals;
 * the state of a model is a 1-D float array of fixed length (``n_states``), so that units of
   one structure stack under vmap; a model holds its parameters as array leaves and its
-  structural choices (input modes, switches) as static fields;
+  structural choices (input modes, switches, PSS/E ICONs) as integer leaves that select a
+  signal path with ``jnp.where``, so that units whose switches differ share one structure
+  (and one compiled program);
 * ``initial_state`` returns the steady state that holds the given operating point, and what
   reference the model needs to stay there (Vref of an exciter); ``vector_field`` returns
   d(state)/dt; outputs are separate methods so that the composed unit reads them in order.

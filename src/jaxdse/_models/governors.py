@@ -32,14 +32,23 @@ import abc
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from .._base.blocks import blocked as _blocked
 from .._base.blocks import lag as _lag
 from .._base.blocks import lead_lag as _lead_lag
 from .._base.blocks import safe as _safe
 from .._base.blocks import washout as _washout
-from .._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that, concrete
+from .._base.fields import (
+    all_concrete,
+    as_flag,
+    as_float,
+    check_flag,
+    check_nonnegative,
+    check_positive,
+    check_that,
+    concrete,
+)
 
 
 class AbstractGovernor(eqx.Module):
@@ -443,10 +452,10 @@ class GGOV1(AbstractGovernor):
       the load from (Pref, dw), which jaxdse's governor interface needs.
     """
 
-    rselect: int = eqx.field(static=True, default=1)
+    rselect: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """Rselect (ICON): droop feedback, 1 electrical power, -1 governor output (requested
     stroke FSR), -2 fuel valve stroke; 0 (isochronous) is not supported."""
-    flag: int = eqx.field(static=True, default=1)
+    flag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """Flag (ICON): 1 fuel flow proportional to speed (wf = s3 (1 + dw)), 0 independent of speed."""
     r_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.04)
     """R: permanent droop [pu speed / pu power (or pu stroke)] (> 0)."""
@@ -520,12 +529,11 @@ class GGOV1(AbstractGovernor):
     """Trate / MBASE (1 when Trate = 0): Tm = base_ratio Pm, Pelec_gov = Pelec / base_ratio."""
 
     def __check_init__(self):
-        if self.rselect not in (1, -1, -2):
+        if concrete(self.rselect) and int(self.rselect) not in (1, -1, -2):
             raise ValueError(f"GGOV1.rselect must be 1, -1 or -2, got {self.rselect}"
                              + (" (isochronous governors have no droop steady state)"
-                                if self.rselect == 0 else ""))
-        if self.flag not in (0, 1):
-            raise ValueError(f"GGOV1.flag must be 0 or 1, got {self.flag}")
+                                if int(self.rselect) == 0 else ""))
+        check_flag(self, "flag")
         check_positive(self, "r_pu", "t_act_s", "k_turb", "r_open_pu_s", "delt_s", "base_ratio")
         check_nonnegative(self, "t_pelec_s", "kpgov", "kigov", "kdgov", "t_dgov_s", "t_b_s", "t_c_s",
                           "t_eng_s", "t_fload_s", "kpload", "kiload", "kimw", "aset_pu_s", "ka",
@@ -539,7 +547,7 @@ class GGOV1(AbstractGovernor):
 
     # -- algebraic pieces --
     def _speed_factor(self, dw):
-        return 1.0 + dw if self.flag == 1 else jnp.ones_like(jnp.asarray(dw, float))
+        return jnp.where(self.flag == 1, 1.0 + dw, jnp.ones_like(jnp.asarray(dw, float)))
 
     def _damping(self, dw):
         return jnp.where(self.dm_pu > 0, self.dm_pu * dw, 0.0)
@@ -566,16 +574,15 @@ class GGOV1(AbstractGovernor):
 
     def steady_state(self, t_ref, dw):
         ff, damp = self._speed_factor(dw), self._damping(dw)
-        if self.rselect == 1:
-            f_gov = (((t_ref - dw) / self.r_pu + damp) / self.k_turb + self.w_fnl_pu) / ff
-        else:
-            f_gov = (t_ref - dw) / self.r_pu
+        electrical = self.rselect == 1      # the droop on Pelec; else on the valve (FSR)
+        f_gov = jnp.where(electrical, (((t_ref - dw) / self.r_pu + damp) / self.k_turb + self.w_fnl_pu) / ff,
+                          (t_ref - dw) / self.r_pu)
         f_load = self._tlim / (ff * self._temp_factor(dw))
         fsr = jnp.clip(jnp.minimum(f_gov, f_load), self.v_min_pu, self.v_max_pu)
         wf = fsr * ff
         p_t = self.k_turb * (wf - self.w_fnl_pu)
         pe = p_t - damp
-        fb = pe if self.rselect == 1 else fsr
+        fb = jnp.where(electrical, pe, fsr)
         err = jnp.clip(t_ref - dw - self.r_pu * fb, self.minerr_pu, self.maxerr_pu)
         k_g = self._tracking_rate(self.kpgov, self.kigov)
         xi = fsr - self.kpgov * err + jnp.where(k_g > 0, self.kigov * err / _safe(k_g), 0.0)
@@ -591,7 +598,7 @@ class GGOV1(AbstractGovernor):
         p_el = pm if p_elec is None else p_elec / self.base_ratio
         pe_m, d_pe = _lag(p_el, state[0], self.t_pelec_s)
         q, s3 = state[3], state[4]
-        fb = {1: pe_m, -1: q, -2: s3}[self.rselect]
+        fb = jnp.where(self.rselect == 1, pe_m, jnp.where(self.rselect == -1, q, s3))
         err = jnp.clip(t_ref - dw - self.r_pu * fb, self.minerr_pu, self.maxerr_pu)
         deriv, d_d = _washout(err, state[1], self.t_dgov_s)
         fsrn = self.kpgov * err + state[2] + self.kdgov * deriv
@@ -615,10 +622,8 @@ class GGOV1(AbstractGovernor):
 
     def reference_from_steady(self, t_m, dw):
         pm = t_m / self.base_ratio
-        if self.rselect == 1:
-            return self.r_pu * pm + dw
         fsr = ((pm + self._damping(dw)) / self.k_turb + self.w_fnl_pu) / self._speed_factor(dw)
-        return self.r_pu * fsr + dw
+        return self.r_pu * jnp.where(self.rselect == 1, pm, fsr) + dw
 
 
 # --- IEESGO -----------------------------------------------------------------------------------

@@ -3,10 +3,12 @@ two input signals.
 
 Conventions (every model, PSS/E behaviour where the library states it):
 
-* the input signal is chosen by the ICON MODE (static field) from :class:`StabiliserInputs`:
+* the input signal is chosen by the ICON MODE from :class:`StabiliserInputs`:
   1 rotor speed deviation [pu], 2 bus frequency deviation [pu of nominal frequency, not Hz],
   3 electrical power PELEC [pu on MBASE, positive generating], 4 accelerating power
   PMECH - PELEC [pu on MBASE], 5 bus voltage magnitude [pu], 6 its time derivative [pu/s];
+* the ICONs (input codes, remote buses) are integer leaves, not static fields: the input is
+  chosen with ``jnp.where``, so units whose codes differ share one compiled program;
 * a remote-bus ICON (busr != 0) is accepted and recorded (``remote_bus``), but the signal is
   taken at the machine terminal: :attr:`remote_input_at_terminal` tells the caller to say so;
 * a lag ``1/(1 + sT)`` with T = 0 and a lead-lag ``(1 + sTa)/(1 + sTb)`` with Tb = 0 are
@@ -45,12 +47,12 @@ from collections.abc import Sequence
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from .._base.blocks import lag as _lag
 from .._base.blocks import lead_lag as _lead_lag
 from .._base.blocks import safe as _safe
-from .._base.fields import all_concrete, as_float, check_nonnegative, check_that
+from .._base.fields import all_concrete, as_flag, as_float, check_nonnegative, check_that, concrete
 from .base import AbstractStabiliser, StabiliserInputs, record_message
 
 INPUT_MODES = {
@@ -65,22 +67,24 @@ INPUT_MODES = {
 with the same position (MODE 1 = ``speed_dev_pu`` ... MODE 6 = ``dvt_dt_pu_s``)."""
 
 
-def _check_mode(module, name: str, mode: int, allow_zero: bool = False) -> None:
+def _check_mode(module, name: str, mode, allow_zero: bool = False) -> None:
     lo = 0 if allow_zero else 1
-    if not lo <= mode <= 6:
+    if concrete(mode) and not lo <= int(mode) <= 6:
         raise ValueError(f"{type(module).__name__}.{name} must be an input code {lo}..6, got {mode}")
 
 
-def _check_bus(module, name: str, bus: int) -> None:
-    if bus < 0:
+def _check_bus(module, name: str, bus) -> None:
+    if concrete(bus) and int(bus) < 0:
         raise ValueError(f"{type(module).__name__}.{name} must be a bus number >= 0, got {bus}")
 
 
-def _signal(inputs: StabiliserInputs, mode: int):
-    """The input selected by a PSS/E input code (0: no signal)."""
-    if mode == 0:
-        return jnp.zeros_like(jnp.asarray(inputs.speed_dev_pu, dtype=float))
-    return jnp.asarray(inputs[mode - 1], dtype=float)
+def _signal(inputs: StabiliserInputs, mode):
+    """The input selected by a PSS/E input code (0: no signal; the code is a leaf, so units
+    whose codes differ share one compiled program)."""
+    out = jnp.zeros_like(jnp.asarray(inputs.speed_dev_pu, dtype=float))
+    for code, signal in enumerate(inputs, start=1):
+        out = jnp.where(mode == code, jnp.asarray(signal, dtype=float), out)
+    return out
 
 
 def _nonzero(d):
@@ -138,9 +142,9 @@ class IEEEST(AbstractStabiliser):
     the washout (output clip(KS u)); T6 must be > 0.
     """
 
-    mode: int = eqx.field(static=True, converter=int, default=1)
+    mode: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """MODE: input signal code 1..6 (see :data:`INPUT_MODES`)."""
-    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    remote_bus: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """busr: remote bus of the input signal (0: own bus); not modelled, the signal is local."""
     a1_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
     """A1: first filter denominator, s coefficient [s] (>= 0)."""
@@ -201,7 +205,7 @@ class IEEEST(AbstractStabiliser):
     @property
     def remote_input_at_terminal(self) -> bool:
         """True when the record names a remote input bus (busr != 0) taken here at the terminal."""
-        return self.remote_bus != 0
+        return bool(np.asarray(self.remote_bus) != 0)
 
     def _denominator(self):
         """d1..d4 of D(s) = (1 + A1 s + A2 s^2)(1 + A3 s + A4 s^2)."""
@@ -274,13 +278,13 @@ class ST2CUT(AbstractStabiliser):
     available here to settle it, and every record in our data sets VCU = VCL = 0).
     """
 
-    mode: int = eqx.field(static=True, converter=int, default=1)
+    mode: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """MODE (ICS1): first input signal code 1..6 (see :data:`INPUT_MODES`)."""
-    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    remote_bus: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """busr (IB1): remote bus of the first input (0: own bus); not modelled."""
-    mode2: int = eqx.field(static=True, converter=int, default=0)
+    mode2: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """MODE2 (ICS2): second input signal code 0..6 (0: no second input)."""
-    remote_bus2: int = eqx.field(static=True, converter=int, default=0)
+    remote_bus2: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """busr2 (IB2): remote bus of the second input (0: own bus); not modelled."""
     k1: Float[Array, ""] = eqx.field(converter=as_float, default=10.0)
     """K1: gain of the first input [pu output / pu input]."""
@@ -334,7 +338,8 @@ class ST2CUT(AbstractStabiliser):
     def remote_input_at_terminal(self) -> bool:
         """True when the record names a remote input bus (busr or busr2 != 0), taken here at the
         terminal."""
-        return self.remote_bus != 0 or (self.mode2 != 0 and self.remote_bus2 != 0)
+        return bool(np.asarray(self.remote_bus) != 0
+                    or (np.asarray(self.mode2) != 0 and np.asarray(self.remote_bus2) != 0))
 
     def _path(self, state, inputs):
         u1, u2 = _signal(inputs, self.mode), _signal(inputs, self.mode2)
@@ -436,13 +441,13 @@ class PSS2A(AbstractStabiliser):
     the documented [(1 + s T8)/(1 + s T9)^M]^N.
     """
 
-    mode: int = eqx.field(static=True, converter=int, default=1)
+    mode: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
     """ICS1: first input signal code 1..6 (see :data:`INPUT_MODES`)."""
-    remote_bus: int = eqx.field(static=True, converter=int, default=0)
+    remote_bus: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """REMBUS1: remote bus of the first input (0: own bus); not modelled."""
-    mode2: int = eqx.field(static=True, converter=int, default=3)
+    mode2: Int[Array, ""] = eqx.field(converter=as_flag, default=3)
     """ICS2: second input signal code 0..6 (0: no second input)."""
-    remote_bus2: int = eqx.field(static=True, converter=int, default=0)
+    remote_bus2: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
     """REMBUS2: remote bus of the second input (0: own bus); not modelled."""
     m_rtf: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
     """M: ramp-tracking filter denominator order (integer >= 0, M N <= 8)."""
@@ -509,7 +514,8 @@ class PSS2A(AbstractStabiliser):
     @property
     def remote_input_at_terminal(self) -> bool:
         """True when a record names a remote input bus, taken here at the terminal."""
-        return self.remote_bus != 0 or (self.mode2 != 0 and self.remote_bus2 != 0)
+        return bool(np.asarray(self.remote_bus) != 0
+                    or (np.asarray(self.mode2) != 0 and np.asarray(self.remote_bus2) != 0))
 
     def _inputs(self, inputs):
         return _signal(inputs, self.mode), _signal(inputs, self.mode2)

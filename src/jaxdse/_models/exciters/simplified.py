@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from ..._base.blocks import lead_lag, nonwindup_lag
-from ..._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from ..._base.fields import all_concrete, as_flag, as_float, check_nonnegative, check_positive, check_that
 from ..base import AbstractExciter, ExciterInputs
 
 # --- SEXS -------------------------------------------------------------------------------------
@@ -67,12 +67,12 @@ class SEXS(AbstractExciter):
 
 # --- SCRX -------------------------------------------------------------------------------------
 
-def _switch(x) -> int:
-    """CSWITCH from a .dyr number: 0 or 1 (ValueError otherwise)."""
+def _switch(x):
+    """CSWITCH from a .dyr number: 0 or 1 (ValueError otherwise), as an integer leaf."""
     value = float(x)
     if value not in (0.0, 1.0):
         raise ValueError(f"CSWITCH must be 0 or 1, got {x}")
-    return int(value)
+    return as_flag(int(value))
 
 
 class SCRX(AbstractExciter):
@@ -109,7 +109,7 @@ class SCRX(AbstractExciter):
     """EMIN: lower limit of EX [pu]."""
     e_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
     """EMAX: upper limit of EX [pu]."""
-    cswitch: int = eqx.field(static=True, converter=_switch, default=0)
+    cswitch: Int[Array, ""] = eqx.field(converter=_switch, default=0)
     """CSWITCH: 0 bus fed (EX times the terminal voltage), 1 solid fed."""
     rc_rfd: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
     """rc/rfd: field discharge to field winding resistance ratio [-] (0: negative current)."""
@@ -126,7 +126,7 @@ class SCRX(AbstractExciter):
         return 2
 
     def _source(self, inputs: ExciterInputs):
-        return inputs.vt_pu if self.cswitch == 0 else jnp.ones_like(inputs.vt_pu)
+        return jnp.where(self.cswitch == 0, inputs.vt_pu, jnp.ones_like(inputs.vt_pu))
 
     def initial_state(self, efd0, inputs: ExciterInputs):
         efd0 = jnp.asarray(efd0, float)

@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Float, Int
 
 from ..._base.blocks import blocked, lag, lead_lag, nonwindup_lag, safe, washout
-from ..._base.fields import all_concrete, as_float, check_nonnegative, check_positive, check_that
+from ..._base.fields import all_concrete, as_flag, as_float, check_nonnegative, check_positive, check_that
 from ..base import AbstractExciter, ExciterInputs
 from .common import rectifier_fex, saturation_product
 
@@ -239,12 +239,13 @@ class ESST3A(AbstractExciter):
 # These models let Efd depend on Vref directly when the blocks between them are bypassed (TA = 0
 # and a proportional path): ``efd(state, inputs, vref)`` evaluates that path with the Vref given.
 
-def _icon(x) -> int:
-    """An integer ICON from a .dyr number (1.0 -> 1); ValueError for a non-integer."""
+def _icon(x):
+    """An integer ICON from a .dyr number (1.0 -> 1) as an integer leaf; ValueError for a
+    non-integer."""
     value = float(x)
     if not value.is_integer():
         raise ValueError(f"ICON must be an integer, got {x}")
-    return int(value)
+    return as_flag(int(value))
 
 
 def _pi_nonwindup(u, x, kp, ki, lo, hi):
@@ -442,9 +443,9 @@ class ESST1A(AbstractExciter):
     (TA = 0): ``efd(state, inputs, vref)``.
     """
 
-    uel: int = eqx.field(static=True, converter=_icon, default=1)
+    uel: Int[Array, ""] = eqx.field(converter=_icon, default=1)
     """UEL (ICON): input location of VUEL, 1-3 (VUEL absent: kept for the record)."""
-    vos: int = eqx.field(static=True, converter=_icon, default=1)
+    vos: Int[Array, ""] = eqx.field(converter=_icon, default=1)
     """VOS (ICON): input location of VOTHSG, 1 (summing junction) or 2 (added to VA')."""
     t_r_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
     """TR: voltage transducer time constant [s] (0: pass-through)."""
@@ -487,8 +488,8 @@ class ESST1A(AbstractExciter):
         check_positive(self, "ka")
         check_nonnegative(self, "t_r_s", "t_c_s", "t_b_s", "t_c1_s", "t_b1_s", "t_a_s", "kc",
                           "kf", "t_f_s", "klr")
-        check_that(self, self.uel in (1, 2, 3), f"UEL must be 1, 2 or 3, got {self.uel}")
-        check_that(self, self.vos in (1, 2), f"VOS must be 1 or 2, got {self.vos}")
+        check_that(self, jnp.isin(self.uel, jnp.asarray([1, 2, 3])), f"UEL must be 1, 2 or 3, got {self.uel}")
+        check_that(self, jnp.isin(self.vos, jnp.asarray([1, 2])), f"VOS must be 1 or 2, got {self.vos}")
         if all_concrete(self.vi_max_pu, self.vi_min_pu, self.va_max_pu, self.va_min_pu,
                         self.vr_max_pu, self.vr_min_pu):
             check_that(self, self.vi_max_pu >= self.vi_min_pu,
@@ -506,8 +507,8 @@ class ESST1A(AbstractExciter):
         return self.klr * jnp.maximum(inputs.ifd_pu - self.ilr_pu, 0.0)
 
     def _chain(self, state, inputs: ExciterInputs, vref):
-        vs1 = inputs.vs_pu if self.vos == 1 else jnp.zeros_like(inputs.vs_pu)
-        vs2 = inputs.vs_pu if self.vos == 2 else jnp.zeros_like(inputs.vs_pu)
+        vs1 = jnp.where(self.vos == 1, inputs.vs_pu, jnp.zeros_like(inputs.vs_pu))
+        vs2 = jnp.where(self.vos == 2, inputs.vs_pu, jnp.zeros_like(inputs.vs_pu))
         vm_s, d_s = lag(inputs.vt_pu, state[0], self.t_r_s)
         offset = vs2 - self._ilr(inputs)  # VA' = VA + offset
         kf = jnp.where(self.t_f_s > 0, self.kf / safe(self.t_f_s), 0.0)  # VF = kf (VA' - x_f)
