@@ -200,12 +200,26 @@ def _to_z(x, spec: ParameterSpec):
     return float(np.log(u) - np.log1p(-u))
 
 
-def _from_z(z, spec: ParameterSpec):
+def _from_z(z, positive: bool, lower, upper):
+    """The parameter at coordinate ``z`` between ``lower`` and ``upper`` (traced: a unit's bounds
+    are its own values' multiples, and other units of its model chain share the program)."""
     u = jax.nn.sigmoid(z)
-    if spec.positive:
-        lo, hi = np.log(spec.lower), np.log(spec.upper)
+    if positive:
+        lo, hi = jnp.log(lower), jnp.log(upper)
         return jnp.exp(lo + (hi - lo) * u)
-    return spec.lower + (spec.upper - spec.lower) * u
+    return lower + (upper - lower) * u
+
+
+def _traced(specs) -> tuple:
+    """``specs`` as the compiled programs see them: where each parameter sits, not its bounds
+    (those are passed as arrays), so that the units of one model chain share every program."""
+    return tuple(dataclasses.replace(s, lower=0.0, upper=0.0) for s in specs)
+
+
+def _bounds(specs):
+    """(lower, upper) of ``specs`` as arrays."""
+    return (jnp.asarray([s.lower for s in specs], dtype=float),
+            jnp.asarray([s.upper for s in specs], dtype=float))
 
 
 def with_values(unit: DyrUnit, specs, values) -> DyrUnit:
@@ -274,7 +288,7 @@ def jacobian(unit: DyrUnit, specs, events: Events, sigma, settings: PlaybackSett
     x0 = np.array([float(s.value(unit)) for s in specs])
     scale = np.array([_scale(s, v) for s, v in zip(specs, x0)])
     r, jac = _residual_jacobian(jnp.zeros(len(specs)), jnp.asarray(x0), jnp.asarray(scale), unit,
-                                specs, events, jnp.asarray(sigma), settings)
+                                _traced(specs), events, jnp.asarray(sigma), settings)
     return np.asarray(r), np.asarray(jac), scale
 
 
@@ -345,15 +359,16 @@ class Calibration(NamedTuple):
     """The :class:`ParameterSpec` of each fitted parameter (``labels`` order)."""
 
 
-def _values(z, specs, x0, free):
+def _values(z, specs, x0, free, lower, upper):
     """The parameters at ``z``: the free ones from their coordinates, the others held at ``x0``
     (exactly: the coordinates' round trip is not)."""
-    return jnp.where(free, jnp.stack([_from_z(z[j], s) for j, s in enumerate(specs)]), x0)
+    return jnp.where(free, jnp.stack([_from_z(z[j], s.positive, lower[j], upper[j])
+                                      for j, s in enumerate(specs)]), x0)
 
 
 def _fit_residuals(z, args):
-    unit, specs, events, sigma, settings, x0, free = args
-    return residuals(_values(z, specs, x0, free), unit, specs, events, sigma, settings)
+    unit, specs, events, sigma, settings, x0, free, lower, upper = args
+    return residuals(_values(z, specs, x0, free, lower, upper), unit, specs, events, sigma, settings)
 
 
 @eqx.filter_jit
@@ -380,11 +395,12 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     x_all = np.array([float(s.value(unit)) for s in specs])
     z0 = jnp.asarray([_to_z(v, s) for v, s in zip(x_all, specs)])
     solver = optx.LevenbergMarquardt(rtol=cal.rtol, atol=cal.atol)
+    lower, upper = _bounds(specs)
     sol = optx.least_squares(_fit_residuals, solver, z0,
-                             args=(unit, specs, events, jnp.asarray(sigma), settings,
-                                   jnp.asarray(x_all), jnp.asarray(free)),
+                             args=(unit, _traced(specs), events, jnp.asarray(sigma), settings,
+                                   jnp.asarray(x_all), jnp.asarray(free), lower, upper),
                              max_steps=cal.max_steps, throw=False)
-    x_fit = np.asarray(_values(sol.value, specs, x_all, free))
+    x_fit = np.asarray(_values(sol.value, specs, x_all, free, lower, upper))
     fitted = with_values(unit, specs, x_fit)
     r, jac, scale = jacobian(fitted, specs, events, sigma, settings)
     jac, scale = jac[:, free], scale[free]
@@ -409,7 +425,7 @@ def calibrate(unit: DyrUnit, specs, events: Events, settings: PlaybackSettings =
     if cal.input_draws > 1:
         rng = np.random.default_rng(cal.seed)
         eps = rng.standard_normal((cal.input_draws, n_ev, n_t, 2)) * v_noise
-        r_draws = np.asarray(_input_noise_residuals(jnp.asarray(x_fit), fitted, specs, events,
+        r_draws = np.asarray(_input_noise_residuals(jnp.asarray(x_fit), fitted, _traced(specs), events,
                                                     jnp.asarray(sigma), settings, jnp.asarray(eps)))
         steps = -(r_draws - r[None]) @ jac @ a_inv.T
         cov = cov + np.cov(steps, rowvar=False).reshape(p, p)
