@@ -485,3 +485,26 @@ def test_a_fault_plays_back_converged():
     assert np.ptp(np.asarray(ref.efd_pu)) > 1.0        # the fault drives the exciter hard
     np.testing.assert_allclose(r.q_pu, ref.q_pu, rtol=0, atol=1e-4)
     np.testing.assert_allclose(r.efd_pu, ref.efd_pu, rtol=0, atol=1e-3)
+
+
+def test_a_structure_beyond_one_call_plays_back_in_chunks(recording, monkeypatch):
+    """``jaxdse fleet`` plays a model structure's units in calls of at most ``CHUNK_UNITS``
+    (the last padded): three one-unit plants in chunks of two give each plant its own unit's
+    playback (the padding's results are dropped)."""
+    import jaxdse._app.dyr_fleet as dyr_fleet
+    from jaxdse._dyr.records import UnitModel
+
+    _, series, _, _, _ = recording
+    units = [sexs_unit(), sexs_unit(h_s=3.0, k=60.0), sexs_unit(h_s=5.5, r_pu=0.04)]
+    one = np.ones(1)
+    jobs = {f"G{k}": (dyr_fleet.PlantModel([UnitModel(u)], one * 100.0, one, one), series)
+            for k, u in enumerate(units)}
+    assert [n for _, n in dyr_fleet._chunks([(0, 0, u, series) for u in units], 2)] == [2, 1]
+    monkeypatch.setattr(dyr_fleet, "CHUNK_UNITS", 2)
+    played = dict(dyr_fleet.play_back_plants(jobs, dyr_fleet.PlaybackOptions()))
+    assert sorted(played) == sorted(jobs)
+    for k, unit in enumerate(units):
+        single = PLAY(unit, series)
+        np.testing.assert_allclose(played[f"G{k}"].p_pu, single.p_pu, rtol=1e-8, atol=1e-9)
+        np.testing.assert_allclose(played[f"G{k}"].q_pu, single.q_pu, rtol=1e-8, atol=1e-9)
+        assert played[f"G{k}"].ok

@@ -5,7 +5,8 @@ plant's terminal voltage (as the front end mapped it) is imposed on every unit, 
 starts from its share of the plant's measured P and Q (shares of the .raw PG and QG, or of
 MBASE where those are zero), and the plant's simulated P and Q are the sum. A plant with a
 unit whose records include a model jaxdse does not simulate plays back the surrogate, and
-its page says which record. Units of one model structure and length run in one vmapped call.
+its page says which record. Units of one model structure and length share one compiled,
+vmapped program, in calls of at most :data:`CHUNK_UNITS` units.
 """
 
 from __future__ import annotations
@@ -224,6 +225,12 @@ def _starts(units, u0, i_re, i_im):
     return (eqx.filter_vmap(_start)(units, u0, i_re, i_im),)
 
 
+CHUNK_UNITS = 8
+"""Units per playback call at most: a structure's units beyond it run in chunks of this size
+(the last padded: one program per structure). Under vmap an adaptive solve moves in lockstep
+and a frame interval that one unit passes only at the fixed step costs every unit of its call
+(Texas 7k: 87 type-3 wind plants in one call took 302 s of a 438 s warm run)."""
+
 WAIT_BASE_S = 60.0
 """The wait on one call of the playback, once compiled: this much [s] ..."""
 WAIT_PER_UNIT_FRAME_S = 2e-3
@@ -238,6 +245,28 @@ def wait_limit_s(units: int, frames: int) -> float:
 
 def _stack(trees):
     return jax.tree.map(lambda *x: jnp.stack(x), *trees)
+
+
+def _icons(unit) -> tuple:
+    """The unit's integer leaves (its records' ICONs, flags): units alike in them tend to take
+    their steps alike, so they share a chunk."""
+    return tuple(int(v) for x in jax.tree.leaves(unit)
+                 if jnp.issubdtype(jnp.asarray(x).dtype, jnp.integer) for v in np.ravel(x))
+
+
+def _chunks(items: list, size: int | None = None) -> list:
+    """``items`` (of one structure) in chunks of at most ``size``, ordered by their ICONs, the
+    last padded with its last item to ``size`` when there is more than one chunk; each chunk
+    is (the items to stack, how many of them are real). ``size``: :data:`CHUNK_UNITS`."""
+    size = CHUNK_UNITS if size is None else size
+    if len(items) <= size:
+        return [(items, len(items))]
+    items = sorted(items, key=lambda it: _icons(it[2]))
+    out = []
+    for k in range(0, len(items), size):
+        part = items[k:k + size]
+        out.append((part + [part[-1]] * (size - len(part)), len(part)))
+    return out
 
 
 @dataclasses.dataclass
@@ -279,9 +308,10 @@ class DyrOutcome:
 def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str, PlantPlayback]]:
     """Play back every plant of ``jobs`` = {name: (PlantModel, TerminalSeries on the plant
     base)}; yields (name, PlantPlayback) as each plant's units are done. Units of one structure
-    and length share a call; the calls trace, compile and run side by side on the cores (a call
+    and length share a program; the calls trace, compile and run side by side on the cores (a call
     blocks its thread until its result is ready), the largest first, so that the caller's work
-    on the plants done overlaps the calls still running. With ``solver = "tsit5"``, each unit's
+    on the plants done overlaps the calls still running; a structure with more than
+    :data:`CHUNK_UNITS` units runs in calls of that many (one program). With ``solver = "tsit5"``, each unit's
     modes at its initial state are computed first (the Jacobians from one call per group, the
     eigenvalues on the host), and a unit the explicit step cannot follow is played back with
     Kvaerno5 (noted). Every wait is bounded (:func:`wait_limit_s`): a call that does not return
@@ -355,16 +385,17 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
                     notes[name].append(f"unit {k + 1} ({models.get('machine', models.get('converter'))}): "
                                        + stiff_note(fastest, dt / settings.substeps, "Tsit5"))
     implicit = dataclasses.replace(options, solver="kvaerno5").settings
-    order = grouped(flat, key=lambda it: (it[0], it[1]) in stiff)
+    calls = [c for items in grouped(flat, key=lambda it: (it[0], it[1]) in stiff) for c in _chunks(items)]
+    order = [items[:n] for items, n in calls]
 
     def run(items):
         how = implicit if (items[0][0], items[0][1]) in stiff else settings
         units, series = _stack([it[2] for it in items]), _stack([it[3] for it in items])
         return _Played(*jax.device_get(programs.call("_batch", _batch, units, series, how)))
 
-    tasks = [Task(label(items, implicit if (items[0][0], items[0][1]) in stiff else settings),
+    tasks = [Task(label(items[:n], implicit if (items[0][0], items[0][1]) in stiff else settings),
                   wait_limit_s(len(items), int(items[0][3].t_s.shape[0])), lambda items=items: run(items),
-                  COMPILE_LIMIT_S) for items in order]
+                  COMPILE_LIMIT_S) for items, n in calls]
     results: dict = {}
     left = {name: len(pm.units) for name, (pm, _) in jobs.items()}
     for i, res in bounded(tasks, threads(len(order)), threads=in_threads):

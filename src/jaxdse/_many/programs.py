@@ -32,6 +32,7 @@ FOLDER = "jaxdse_exported"
 """Subfolder of the compilation cache folder that holds the exported programs."""
 
 _LOCK = threading.Lock()
+_BUILDING: dict = {}
 _LOADED: dict[str, export.Exported] = {}
 _JITTED: dict[Callable, Callable] = {}
 _COMPILED: dict = {}
@@ -86,22 +87,37 @@ def call(name: str, fn: Callable, *args):
     return tuple(compiled(*args))
 
 
+def _once(cache: dict, key, build: Callable):
+    """``cache[key]``, built by ``build()`` once: a thread that asks for a key another thread is
+    building waits for it (calls of one program side by side, e.g. the chunks of one model
+    structure, trace and compile it once)."""
+    with _LOCK:
+        if key in cache:
+            return cache[key]
+        lock = _BUILDING.setdefault(key, threading.Lock())
+    with lock:
+        with _LOCK:
+            if key in cache:
+                return cache[key]
+        value = build()
+        with _LOCK:
+            cache[key] = value
+            _BUILDING.pop(key, None)
+        return value
+
+
 def _compiled(key, make: Callable, leaves):
     """The compiled executable of ``make()`` for these arrays' shapes (kept per key and shapes)."""
     key = (key, tuple((tuple(x.shape), str(x.dtype)) for x in leaves))
-    with _LOCK:
-        if key in _COMPILED:
-            return _COMPILED[key]
-    compiled = make().lower(*leaves).compile()
-    with _LOCK:
-        return _COMPILED.setdefault(key, compiled)
+    return _once(_COMPILED, key, lambda: make().lower(*leaves).compile())
 
 
 def _program(folder: Path, name: str, fn: Callable, treedef, static, leaves) -> export.Exported:
     key = _key(name, treedef, static, leaves)
-    with _LOCK:
-        if key in _LOADED:
-            return _LOADED[key]
+    return _once(_LOADED, key, lambda: _load_or_export(folder, name, key, fn, treedef, static, leaves))
+
+
+def _load_or_export(folder: Path, name: str, key: str, fn: Callable, treedef, static, leaves):
     path = folder / f"{name}-{key}.stablehlo"
     if path.exists():
         program = export.deserialize(bytearray(path.read_bytes()))
@@ -119,8 +135,7 @@ def _program(folder: Path, name: str, fn: Callable, treedef, static, leaves) -> 
             fh.write(data)
         os.chmod(tmp, 0o644)   # as JAX's cache entries (mkstemp makes it private)
         os.replace(tmp, path)
-    with _LOCK:
-        return _LOADED.setdefault(key, program)
+    return program
 
 
 __all__ = ["call"]
