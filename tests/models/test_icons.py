@@ -34,7 +34,8 @@ def _same(f, modules, *args):
     assert one._cache_size() == 1      # one compiled program for every member
     batched = jax.jit(jax.vmap(one, in_axes=(0, *[None] * len(args))))(_stacked(modules), *args)
     for k, o in enumerate(own):
-        jax.tree.map(lambda b, x, k=k: np.testing.assert_allclose(b[k], x, rtol=1e-13, atol=1e-15), batched, o)
+        jax.tree.map(lambda b, x, k=k: np.testing.assert_allclose(b[k], x, rtol=1e-13, atol=1e-15),
+                     batched, o)
     flat = [np.concatenate([np.ravel(x) for x in jax.tree.leaves(o)]) for o in own]
     assert len({tuple(np.round(x, 12)) for x in flat}) > 1
 
@@ -44,10 +45,13 @@ def test_inverter_based_plants():
     u = UnitInputs(jnp.asarray(v * np.cos(ang)), jnp.asarray(v * np.sin(ang)), jnp.asarray(0.002),
                    jnp.asarray(0.0))
     i = np.conj((p + 1j * q) / (v * np.exp(1j * ang)))
-    units = [IbrUnit(REGCA1(lvplsw=s), REECA1(pfflag=pf, vflag=vf, qflag=qf, pflag=pl, pqflag=pq, i_max_pu=0.9),
+    # Lvplsw, PFFLAG, VFLAG, QFLAG, PFLAG, PQFLAG, VCFlag, RefFlag, Fflag
+    flags = ((1, 0, 1, 1, 0, 0, 1, 1, 1), (0, 1, 0, 0, 1, 1, 0, 0, 0), (1, 0, 0, 1, 0, 1, 0, 1, 1),
+             (0, 0, 1, 0, 1, 0, 1, 0, 0))
+    units = [IbrUnit(REGCA1(lvplsw=s),
+                     REECA1(pfflag=pf, vflag=vf, qflag=qf, pflag=pl, pqflag=pq, i_max_pu=0.9),
                      REPCA1(vcflag=vc, refflag=rf, fflag=ff, kc=0.02))
-             for s, pf, vf, qf, pl, pq, vc, rf, ff in ((1, 0, 1, 1, 0, 0, 1, 1, 1), (0, 1, 0, 0, 1, 1, 0, 0, 0),
-                                                       (1, 0, 0, 1, 0, 1, 0, 1, 1), (0, 0, 1, 0, 1, 0, 1, 0, 0))]
+             for s, pf, vf, qf, pl, pq, vc, rf, ff in flags]
 
     def f(unit, u, i_re, i_im):
         y0, refs = unit.initial_state(u, i_re, i_im)

@@ -10,9 +10,10 @@ Conventions (every model):
   Q = |V| Iq. The current out of the terminal in the network frame is (Ip - j Iq) V/|V|;
 * flags (PSS/E ICONs: PFFLAG, VFLAG, QFLAG, PFLAG, PQFLAG, Lvplsw, VCFlag, RefFlag, Fflag,
   Tflag) are integer array leaves like the constants, and select their signal paths with
-  ``jnp.where`` (units whose flags differ share one compiled program); a lag with T = 0 is a pass-through whose state is
-  kept with zero derivative (one state layout under vmap); ``jnp.where``, never Python
-  branching on values; non-windup limits block the derivative that would push further;
+  ``jnp.where`` (units whose flags differ share one compiled program); a lag with T = 0 is a
+  pass-through whose state is kept with zero derivative (one state layout under vmap);
+  ``jnp.where``, never Python branching on values; non-windup limits block the derivative that
+  would push further;
 * the voltage-dip freeze (REECA1: |V| < Vdip or |V| > Vup) sets the derivatives of the frozen
   states to zero; it is a switch of the vector field, so a solver with adaptive steps locates
   it to its tolerance;
@@ -379,8 +380,8 @@ class _ElectricalControls(eqx.Module):
         p_pri = self.pqflag != 0
         ip_max_p = jnp.minimum(vdl2, self.i_max_pu)
         ipcmd_p = jnp.clip(ip_raw, self._ip_floor(ip_max_p), ip_max_p)
-        iq_max = jnp.where(p_pri, jnp.minimum(vdl1, jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd_p ** 2, 1e-12))),
-                           jnp.minimum(vdl1, self.i_max_pu))
+        iq_room = jnp.sqrt(jnp.maximum(self.i_max_pu ** 2 - ipcmd_p ** 2, 1e-12))
+        iq_max = jnp.minimum(vdl1, jnp.where(p_pri, iq_room, self.i_max_pu))
         iqb_raw = self.kvp * e_v + x_v
         iqb = jnp.clip(iqb_raw, -iq_max, iq_max)
         iqcmd = jnp.clip(jnp.where(self.qflag != 0, iqb, iv0) + jnp.where(dip, iqv, 0.0), -iq_max, iq_max)
