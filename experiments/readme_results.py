@@ -16,6 +16,32 @@ README = ROOT / "README.md"
 BEGIN, END = "<!-- results:begin -->", "<!-- results:end -->"
 
 
+
+def _interconnection(r: dict) -> str:
+    """The sentence of the whole-interconnection case (``--only interconnection``)."""
+    st = r.get("steady") or {}
+    cpu = r.get("processing_cpu_ms_per_frame") or {}
+    off = r.get("backlog_worked_off_after_s")
+    text = (f" A whole interconnection: {r['units']} units on {r['streams']} streams at "
+            f"{r['frames_per_s']} frames/s for {r['seconds']:g} s with [inertia], recording off: the "
+            "start's backlog (every unit's first chunk in the same second) worked off "
+            + ("not within the run" if off is None else f"{off:g} s after the first update"))
+    if st:
+        d = st["delay_s"]
+        text += (f"; from then on ({st['updates']} updates over {st['stream_s']:g} s) delay from a "
+                 f"window's last frame to its unit's estimate median {d['median']:.2f} s, 99 % "
+                 f"{d['p99']:.2f} s, max {d['max']:.2f} s")
+    if r.get("steady_inertia_delay_s"):
+        d = r["steady_inertia_delay_s"]
+        text += (f"; the area estimates {d['median']:.2f} s median, 99 % {d['p99']:.2f} s, max "
+                 f"{d['max']:.2f} s after their time")
+    p = r["processing_ms_per_frame"]
+    text += f"; processing per frame median {p['median']:.2f} ms, 99 % {p['p99']:.1f} ms"
+    if cpu:
+        text += f" (CPU {cpu['median']:.2f} / {cpu['p99']:.1f} ms)"
+    return text + f"; peak memory {r['peak_rss_mib']:.0f} MiB."
+
+
 def load(rel: str):
     path = ROOT / rel
     return json.loads(path.read_text()) if path.exists() else None
@@ -224,7 +250,8 @@ def block() -> str:
                + " and ".join(f"{r['delay_s']['median']:.3f} s" for r in mon["speed"]["rows"])
                + ", 99 % " + " and ".join(f"{r['delay_s']['p99']:.3f} s" for r in mon["speed"]["rows"])
                + f" of stream time (differences {mon['speed']['difference_s']['median']:.3f} s and "
-               f"{mon['speed']['difference_s']['p99']:.3f} s)."))
+               f"{mon['speed']['difference_s']['p99']:.3f} s).")
+            + ("" if "interconnection" not in mon else _interconnection(mon["interconnection"]["rows"][0])))
 
     tb = load("benchmarks/results.json")
     if tb:

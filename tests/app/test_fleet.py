@@ -364,6 +364,10 @@ def test_weighted_governor_sums_units():
     x = g.steady_state(ref, 1e-3)
     assert float(g.torque(x, 1e-3)) == pytest.approx(0.7, abs=1e-9)
     assert np.allclose(g.vector_field(x, 1e-3, ref), 0.0, atol=1e-12)
+    # on a series (T_ref's quasi-steady mean): the steady torque slot by slot, as through the
+    # stacked state, to round-off
+    t, w = jnp.linspace(0.2, 1.1, 7), jnp.linspace(-3e-3, 3e-3, 7)
+    assert np.allclose(g._steady_torque(t, w), g.torque(g.steady_state(t, w), w), rtol=0, atol=1e-15)
     # one step of speed: the sum of the units' own responses, weighted
     dw = 2e-3
     units = [jd.TGOV1(), jd.GAST()]

@@ -245,6 +245,7 @@ def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     ('fleet = "{run}"\n[stream.stations]\nnobody = "X"', "stream.stations.nobody"),
     ('fleet = "{run}"\n[inertia]\nstale_s = -1', "inertia.stale_s"),
     ('fleet = "{run}"\n[inertia]\nareas = "region"', "inertia.areas"),
+    ('fleet = "{run}"\nrecord = "yes"', "record"),
 ])
 def test_bad_monitor_files_are_refused_in_one_line(example, tmp_path, capsys, text, key):
     config, _, _ = example
@@ -324,14 +325,15 @@ def test_results_are_published_and_shown(example, tmp_path):
 
 def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     """Two streams (``tile = 2``: units unit1 and unit1~2, one per stream); the second stops
-    after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on."""
+    after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on.
+    ``record = false``: no recording and no replay file, the updates all the same."""
     config, _, _ = example
     source = pmu_sim.tile(load_source(config), 2)
     a = pmu_sim.PmuServer(source, port=0, speed=20.0, loop=True)        # never ends by itself
     b = pmu_sim.PmuServer(source, port=0, speed=20.0, duration=2.0)
     with a.serve_in_thread() as (ha, pa), b.serve_in_thread() as (hb, pb):
         (tmp_path / "m.toml").write_text(
-            f'fleet = "{config}"\nwindow_s = 10.0\ntile = 2\n'
+            f'fleet = "{config}"\nwindow_s = 10.0\ntile = 2\nrecord = false\n'
             f'[[stream]]\nhost = "{ha}"\nport = {pa}\nunits = ["unit1"]\n'
             f'[[stream]]\nhost = "{hb}"\nport = {pb}\nunits = ["unit1~2"]\ntimeout_s = 1.0\n')
         summary = Monitor(load_monitor(tmp_path / "m.toml"), tmp_path / "o", log=lambda x: None).run(6.0)
@@ -341,6 +343,7 @@ def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     assert first and max(first) > max(second, default=0) + 10       # 20x: 10 s of stream time
     s0, s1 = summary["streams"]
     assert s0["disconnects"] == 0 and s1["disconnects"] + s1["connect_failures"] >= 1
+    assert not list((tmp_path / "o").glob("recording_*")) and not (tmp_path / "o" / "replay.toml").exists()
 
 
 def test_stream_clock_measures_delay_in_stream_time():

@@ -353,6 +353,8 @@ MONITOR.toml:
                            # the estimator's settings ([observer], [settings], [identify])
   update_s = 1.0           # a new estimate per unit every update_s seconds
   window_s = 120.0         # ... fitted on the last window_s seconds (first one after window_s)
+  record = true            # write the stream as used, for replay (false: archived elsewhere;
+                           # its CSV text costs a core at 5,000 units and 30 frames/s)
   [[stream]]               # one per PMU or PDC (or a single [stream] table)
   host = "127.0.0.1"
   port = 4712              # (STTP: 7165 by default)
@@ -404,14 +406,14 @@ in the line with its age.
 
 --out DIR gets updates.jsonl (one line per unit and update: t [s since 1970, the window's last
 frame], unit, H_s, H_ci95, D, D_ci95, verdict, reasons, age_s, last_H_s, alarm, delay_s,
-wall_delay_s), the stream as the monitor used it (recording_*.csv) with replay.toml, and
-monitor.json: per stream its counters (data frames, frames used, grid slots without a frame,
-late, repeated and off-grid frames, disconnects, the decoder's counts; "counters" says what
-each counts) and its pace (stream seconds per wall second), and the delay from a frame's
-timestamp to its estimate, measured on the stream's own clock in seconds of stream time (the
-same at any pmu-sim --speed) and in wall seconds. While a unit's window fills, a line every 5 s
-says how far along it is and what it waits for. `jaxdse run DIR/replay.toml` replays the
-recording through the file readers: the same estimates.
+wall_delay_s), the stream as the monitor used it (recording_*.csv) with replay.toml (unless
+record = false), and monitor.json: per stream its counters (data frames, frames used, grid
+slots without a frame, late, repeated and off-grid frames, disconnects, the decoder's counts;
+"counters" says what each counts) and its pace (stream seconds per wall second), and the delay
+from a frame's timestamp to its estimate, measured on the stream's own clock in seconds of
+stream time (the same at any pmu-sim --speed) and in wall seconds. While a unit's window
+fills, a line every 5 s says how far along it is and what it waits for. `jaxdse run
+DIR/replay.toml` replays the recording through the file readers: the same estimates.
 
 Listens only for [publish] and [view], on 127.0.0.1 unless their host says otherwise. Exit
 status 0 after --duration or on Ctrl-C; 2 on bad input with a one-line message.

@@ -45,6 +45,7 @@ re-encoding gives the same bytes.
 from __future__ import annotations
 
 import binascii
+import functools
 import math
 import struct
 from collections import Counter
@@ -297,9 +298,10 @@ class ConfigFrame:
     def rate_hz(self) -> float:
         return float(self.data_rate) if self.data_rate > 0 else -1.0 / self.data_rate
 
-    @property
+    @functools.cached_property
     def data_size(self) -> int:
-        """FRAMESIZE of this configuration's data frames."""
+        """FRAMESIZE of this configuration's data frames (once per configuration: checked on
+        every data frame, and a sum over 800 stations cost 0.3 ms)."""
         return COMMON + sum(s.block_size for s in self.stations) + 2
 
 

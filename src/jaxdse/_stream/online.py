@@ -28,6 +28,7 @@ that few units are ready for (a restarted unit catching up), on a small batch
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Sequence
 
@@ -421,9 +422,10 @@ def _take(tree, rows):
     return jax.tree_util.tree_map(lambda x: x[rows], tree)
 
 
-@jax.jit
+@functools.partial(jax.jit, donate_argnums=0)
 def _put(tree, rows, values):
-    """``tree`` with its rows ``rows`` set to ``values`` (a row given twice: the same values)."""
+    """``tree`` with its rows ``rows`` set to ``values`` (a row given twice: the same values); the
+    group's state is donated and updated in place, not copied whole for a few rows."""
     return jax.tree_util.tree_map(lambda x, v: x.at[rows].set(v), tree, values)
 
 
