@@ -141,8 +141,11 @@ def monitor(fleet: Path, port: int, out: Path, seconds: float, window_s: float, 
 
 
 def screenshot(mon, at: float, path: Path):
-    """The live view as headless Chromium shows it, ``at`` seconds after the monitor started."""
+    """The live view as headless Chromium shows it, ``at`` seconds after the stream's data was
+    turned on (its estimators compiled: tens of seconds on a cold cache, which ``Monitor.run``'s
+    duration does not count either)."""
     browser = shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
+    mon.all_ready.wait(600.0)
     t0 = time.monotonic()
     while mon.view.bound is None and time.monotonic() - t0 < 30:
         time.sleep(0.1)
