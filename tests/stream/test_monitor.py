@@ -167,6 +167,51 @@ def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, mo
             assert u.d_pu_s == pytest.approx(w.d_pu_s, rel=1e-10)
 
 
+@pytest.mark.parametrize("every", [4, None])
+def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkeypatch, every):
+    """With ``defer`` (the live monitor), a unit restarted while another serves is background
+    work: the serving unit's updates come at the same frames as without it, the restarted unit's
+    chunks run in ``catch_up`` (here every 4th frame, or never: then once its backlog reaches
+    ``BACKGROUND_LAG_S``, here 2 s), and both get the updates they get alone."""
+    from jaxdse._stream import online
+
+    _, g, rec = example
+    rec = _head(rec, 1750)                                     # 70 s
+    window = WindowSettings(update_s=1.0, window_s=20.0)
+    usable = np.ones((1750, 2), bool)
+    usable[1000:1020, 1] = False                               # 0.8 s: unit 1 restarts
+    monkeypatch.setattr(online, "MIN_SMALL", 2)
+    monkeypatch.setattr(online, "SMALL_SHARE", 2)
+    monkeypatch.setattr(online, "BACKGROUND_LAG_S", 2.0)
+    now, later = (OnlineGroup(["a", "b"], [g.plant] * 2, [rec.location] * 2, 25.0, window, defer=d)
+                  for d in (False, True))
+    assert later.capacity == now.capacity + 50
+    got = {False: [], True: []}
+    deferred = 0
+    for k in range(1750):
+        x = [rec.v_mag_pu[k], rec.v_ang_rad[k], rec.i_mag_pu[k], rec.i_ang_rad[k], rec.f_hz[k]]
+        for grp in (now, later):
+            got[grp.defer] += [(k, u) for u in grp.push(BASE + k, *[[v, v] for v in x], usable[k])]
+        if later.behind():
+            deferred += 1
+            if every and k % every == 0:
+                got[True] += [(k, u) for u in later.catch_up()]
+    while later.behind():
+        got[True] += [(1750, u) for u in later.catch_up()]
+    assert deferred > 30
+    for n in "ab":
+        a, b = ([x for x in got[d] if x[1].unit == n] for d in (False, True))
+        assert [u.t for _, u in a] == [u.t for _, u in b] and a
+        for (_, u), (_, w) in zip(a, b):                       # to round-off (another batch)
+            assert (u.verdict, u.segment, u.samples) == (w.verdict, w.segment, w.samples)
+            assert u.h_s == pytest.approx(w.h_s, rel=1e-12) and u.h_ci95 == pytest.approx(w.h_ci95, rel=1e-12)
+        if n == "a":                                           # in service: at the same frames
+            assert [k for k, _ in a] == [k for k, _ in b]
+        else:                                                  # restarted: later, by at most the lag
+            late = [kb - ka for (ka, u), (kb, _) in zip(a, b) if u.segment == 2]
+            assert late and max(late) > 0 and max(late) <= 50 + 1
+
+
 def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     config, _, _ = example
     source = load_source(config)

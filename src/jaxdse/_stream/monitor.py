@@ -368,9 +368,10 @@ def unit_groups(units) -> list[list[int]]:
     return list(groups.values())
 
 
-def make_groups(units, rate: float, cfg: MonitorConfig, est,
-                with_frequency: bool = True) -> list[tuple[OnlineGroup, np.ndarray]]:
-    """The :class:`OnlineGroup` of each group of ``units`` and the units' indices in it."""
+def make_groups(units, rate: float, cfg: MonitorConfig, est, with_frequency: bool = True,
+                defer: bool = False) -> list[tuple[OnlineGroup, np.ndarray]]:
+    """The :class:`OnlineGroup` of each group of ``units`` and the units' indices in it
+    (``defer``: a restarted unit's chunks wait for :meth:`OnlineGroup.catch_up`)."""
     from .._core.windowed import WindowSettings
 
     window = WindowSettings(update_s=cfg.update_s, window_s=cfg.window_s)
@@ -381,7 +382,7 @@ def make_groups(units, rate: float, cfg: MonitorConfig, est,
                                 [u.run.measurement.location for u in us], rate, window, est.observer,
                                 est.settings, est.identify, est.verdict,
                                 max_gap_s=min(u.run.measurement.max_gap_s for u in us),
-                                with_frequency=with_frequency), np.asarray(idx)))
+                                with_frequency=with_frequency, defer=defer), np.asarray(idx)))
     return out
 
 
@@ -447,6 +448,8 @@ SUMMARY_KEYS = {
     "processing_cpu_ms_per_frame": "the main thread's CPU time per data frame, its updates included [ms] "
                                    "(processing_ms_per_frame less the time other threads and processes "
                                    "held the cores)",
+    "catch_up_s": "the main thread's seconds on restarted units' chunks, run while no frame waited (not in "
+                  "processing_ms_per_frame)",
     "inertia_delay_s": "with [inertia], per set of area lines, stream seconds from the lines' time to their "
                        "emission (the area estimate holds each unit's latest update, itself delay_s after its "
                        "window's last frame)",
@@ -575,7 +578,8 @@ class _Stream:
                 missing.append(full)
         self.rate = frame.rate_hz
         self.reorder = max(0, math.ceil(self.spec.reorder_s * self.rate - 1e-9))
-        self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream")
+        self.groups = make_groups(self.units, self.rate, self.cfg, self.est, self.spec.frequency == "stream",
+                                  defer=True)
         t0 = time.perf_counter()
         self.log(f"stream {self.k}: compiling the estimators' programs ({len(self.groups)} group(s): up to a "
                  "minute the first time, seconds from the compilation cache; data is turned on once they are "
@@ -718,6 +722,17 @@ class _Stream:
         out = []
         for group, members in self.groups:
             out += group.push(idx, vm[members], va[members], im[members], ia[members], f[members], usable[members])
+        return out
+
+    def behind(self) -> bool:
+        """Whether a restarted unit's chunks wait for :meth:`catch_up`."""
+        return any(group.behind() for group, _ in self.groups)
+
+    def catch_up(self) -> list[Update]:
+        """One deferred chunk of each unit that has one (the main thread's spare time)."""
+        out = []
+        for group, _ in self.groups:
+            out += group.catch_up()
         return out
 
     def _stale(self, v, i, usable):
@@ -882,6 +897,7 @@ class Monitor:
                                  floor_MWs=None if cfg.inertia is None else cfg.inertia.floor_MWs)
         self.processing = []     # seconds of the main thread per data frame (updates included)
         self.processing_cpu = []  # ... of its CPU time (the same without other processes' share of the cores)
+        self.catch_up_s, self._next_catch_up = 0.0, 0   # restarted units' deferred chunks
 
     def emit(self, updates: list[Update], stream: _Stream | None = None, timed: bool = True):
         """Log, record, publish and show ``updates`` of ``stream``; their delay is measured on the
@@ -995,9 +1011,13 @@ class Monitor:
         try:
             while duration_s is None or time.monotonic() - t0 - sum(s.compile_s for s in self.streams) < duration_s:
                 try:
-                    self._handle(q.get(timeout=0.05))
-                except queue.Empty:
-                    pass
+                    self._handle(q.get_nowait())
+                except queue.Empty:     # no frame waits: a restarted unit's chunks, or wait for one
+                    if not self._catch_up():
+                        try:
+                            self._handle(q.get(timeout=0.05))
+                        except queue.Empty:
+                            pass
                 if time.monotonic() >= next_progress:
                     self._progress()
                     next_progress = time.monotonic() + self.progress_s
@@ -1015,6 +1035,8 @@ class Monitor:
                     break
             for s in self.streams:
                 self.emit(s.release(everything=True), s, timed=False)
+                while s.behind():
+                    self.emit(s.catch_up(), s, timed=False)
                 s.close()
             if self._jsonl is not None:
                 self._jsonl.close()
@@ -1023,6 +1045,19 @@ class Monitor:
             if self.view is not None:
                 call(self.view.stop, 5.0, "stopping the live view's web server", self.log)
         return self._finish(time.monotonic() - t0)
+
+    def _catch_up(self) -> bool:
+        """One round of deferred chunks on the next stream that has them; whether there was one."""
+        n = len(self.streams)
+        for j in range(n):
+            s = self.streams[(self._next_catch_up + j) % n]
+            if s.behind():
+                t0 = time.perf_counter()
+                self.emit(s.catch_up(), s)
+                self.catch_up_s += time.perf_counter() - t0
+                self._next_catch_up = (s.k + 1) % n
+                return True
+        return False
 
     def _handle(self, item):
         k, kind, x, arrival = item
@@ -1111,6 +1146,7 @@ class Monitor:
             **self._delays(),
             "processing_ms_per_frame": _percentiles(1e3 * np.asarray(self.processing)),
             "processing_cpu_ms_per_frame": _percentiles(1e3 * np.asarray(self.processing_cpu)),
+            "catch_up_s": round(self.catch_up_s, 3),
             "streams": [{"stream": s.k, "host": s.spec.host, "port": s.spec.port, "pace": s.clock.pace,
                          **dict(s.counts), "decoder": s.decoder(),
                          "unusable_samples": {u.name: int(n) for u, n in zip(s.units, s.unusable) if n},

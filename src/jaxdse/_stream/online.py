@@ -16,7 +16,12 @@ unit, as the file readers do (``jaxdse._io.measurement``):
   next chunk boundary;
 * a segment's first chunk waits for the segment's first ``qss_window_s`` (at most
   ``window_s``: :meth:`~jaxdse._core.windowed.WindowSettings.start_samples`), which give T_ref
-  and the governor's initial state; the chunks behind it then follow one per frame.
+  and the governor's initial state; the chunks behind it then follow one per frame;
+* with ``defer`` (the live monitor), a unit that restarts while others of its group already
+  have estimates is background work: its chunks wait for :meth:`OnlineGroup.catch_up`, which
+  the monitor calls when no frame is waiting, so that a restart's first chunk and catch-up
+  never delay the estimates in service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is
+  served with the frames again.
 
 After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
 intervals and the verdict of the window). Three compiled programs per group: a segment's first
@@ -147,6 +152,9 @@ ceil(U / SMALL_SHARE) rows, the ready units' (the first repeated to fill it), ga
 scattered back, not on the group's whole batch: at 966 units a restarted plant's 46 copies cost
 a 3.9 s first chunk and 28 whole-batch chunks after it. Groups of ``MIN_SMALL`` units or more."""
 MIN_SMALL = 16
+BACKGROUND_LAG_S = 15.0
+"""The stream time a deferred unit's chunks may fall behind the frames [s] (buffer room:
+5 x 8 bytes per unit and sample) before they run with the frames again."""
 
 
 class OnlineGroup:
@@ -157,7 +165,7 @@ class OnlineGroup:
                  config: ObserverConfig = ObserverConfig(), settings: Settings = Settings(),
                  identify_settings: IdentifySettings = IdentifySettings(),
                  verdict_settings: VerdictSettings = VerdictSettings(), max_gap_s: float = 0.5,
-                 with_frequency: bool = True):
+                 with_frequency: bool = True, defer: bool = False):
         if len({str(loc) for loc in locations}) != 1:
             raise ValueError("OnlineGroup: one PMU location per group")
         self.names = list(names)
@@ -175,7 +183,9 @@ class OnlineGroup:
         self.max_gap = int(math.floor(max_gap_s * self.rate + 1e-6))
         self.with_frequency = with_frequency
         self.span = self.halo + self.size + self.tail
-        self.capacity = self.span + self.start + self.size + self.max_gap + 2
+        self.defer = defer
+        self.lag = int(round(BACKGROUND_LAG_S * self.rate)) if defer else 0
+        self.capacity = self.span + self.start + self.size + self.max_gap + 2 + self.lag
         self.buf = np.full((5, self.u, self.capacity), np.nan)
         self.base = None                 # grid index of buffer column 0
         self.last_valid = np.full(self.u, -1, np.int64)   # grid index of each unit's last usable sample
@@ -326,9 +336,25 @@ class OnlineGroup:
         machine)."""
         return self._slices(np.where(which, rows, rows[np.argmax(which)]), span)
 
-    def _chunks(self) -> list[Update]:
+    def _ready(self):
         span = np.where(self.started, self.span, self.span + self.start)   # a first slice: longer
-        ready = (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1)
+        return (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1), span
+
+    def behind(self) -> bool:
+        """Whether chunks are ready that no push ran: deferred ones, or a catch-up's next."""
+        return bool(self._ready()[0].any())
+
+    def catch_up(self) -> list[Update]:
+        """One chunk of every unit whose chunk is ready, deferred ones included."""
+        return self._chunks(defer=False)
+
+    def _chunks(self, defer: bool | None = None) -> list[Update]:
+        ready, span = self._ready()
+        if (self.defer if defer is None else defer) and ready.any():
+            # units in a new segment while others are in service: background, up to the lag
+            filling = self.filled < self.window.blocks
+            behind = self.last_valid - (self.slice_start + span - 1)
+            ready &= ~(filling & (behind < self.lag) & (~filling).any())
         if not ready.any():
             return []
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
