@@ -16,7 +16,11 @@ after the start:
   switched off raised |V| so that the plant absorbed Q, and ANDES's REGCA1 floors the reactive
   current at Iolim at every voltage, not only above Volim as the specification's HVRCM does);
 * ``fault``: a 0.1 s fault at bus 9 (xf = 0.05 pu) that takes the plant's terminal voltage below
-  Vdip, so that the voltage-dip freeze and the Kqv injection act.
+  Vdip, so that the voltage-dip freeze and the Kqv injection act; the injection reaches its
+  limit Iqh1 (Kqv (Vref0 - |V|) > 1.05 pu), so the recording holds Kqv only where |V| jumps;
+* ``dip``: the same fault through xf = 0.3 pu, a shallower dip (|V| to 0.74 pu, below Vdip):
+  the injection stays inside its limits for Kqv up to 1.3 times the bench's, so that
+  ``experiments/andes_ibr_validate/run.py andes_ibr`` can find a planted Kqv x1.3.
 
 Recorded at the plant's terminal (bus 8), 100 frames/s for 6 s: |V| [pu], its angle [rad], the
 frequency deviation of bus 8 (ANDES's BusFreq output minus 1; unused by the plant without
@@ -45,10 +49,12 @@ REGCA1 = dict(Lvplsw=1, Tg=0.02, Rrpwr=10.0, Brkpt=0.9, Zerox=0.4, Lvpl1=1.22, V
 # tried: with VFLAG = 0, Kvp = 2, Kvi = 20, ANDES's Q did not move on the line trip (0.0736 to
 # 0.0740 pu while |V| fell by 1.2 %; a PI_V on Vref1 - Vm would raise it), and issue 44 records
 # that ANDES's REECA1 with QFLAG = 1 does not start at rest; the voltage loops are compared with
-# the SciPy block diagram instead (tests/models/test_ibr.py). Thld and Thld2 = 0 (the post-dip
+# the SciPy block diagram instead (tests/models/test_ibr.py). Trv = 0: ANDES divides the power
+# order by the unfiltered |V| where the specification divides by Vt_filt (with Trv = 0.02 s the
+# fault's P differed by 0.60 % of MBASE RMS; tests/models/test_ibr_andes.py). Thld and Thld2 = 0 (the post-dip
 # hold timers are not modelled in jaxdse); Vref0 = 1.03 written (ANDES does not read 0 as "the
 # initial voltage"); VMAX/VMIN open (ANDES initialises its PI_Q at 0 when it is out of the path).
-REECA1 = dict(IREG=0, PFFLAG=0, VFLAG=1, QFLAG=0, PFLAG=0, PQFLAG=0, Vdip=0.8, Vup=1.2, Trv=0.02,
+REECA1 = dict(IREG=0, PFFLAG=0, VFLAG=1, QFLAG=0, PFLAG=0, PQFLAG=0, Vdip=0.8, Vup=1.2, Trv=0.0,
               dbd1=-0.02, dbd2=0.02, Kqv=2.0, Iqh1=1.05, Iql1=-1.05, Vref0=1.03, Iqfrz=0.0,
               Thld=0.0, Thld2=0.0, Tp=0.02, QMax=0.6, QMin=-0.6, VMAX=999.0, VMIN=-999.0, Kqp=1.0,
               Kqi=0.1, Kvp=2.0, Kvi=20.0, Vref1=1.03, Tiq=0.02, dPmax=99.0, dPmin=-99.0,
@@ -67,6 +73,7 @@ EVENTS = {
     "loadstep": [("Shunt", dict(idx="Shunt_step", bus=9, Vn=138.0, g=0.3, b=-0.1, u=0)),
                  ("Toggle", dict(model="Shunt", dev="Shunt_step", t=1.0))],
     "fault": [("Fault", dict(bus=9, tf=1.0, tc=1.1, xf=0.05, rf=0.0))],
+    "dip": [("Fault", dict(bus=9, tf=1.0, tc=1.1, xf=0.3, rf=0.0))],
 }
 
 

@@ -47,7 +47,7 @@ CASE = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
 # the fault of generate.py stops in ANDES (its Newton step fails after the clearing, at 1.16 s):
 # the REPCA1 bench has three events; Kqv (a voltage dip) is planted on the andes_ibr bench
 BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed"), ".csv.gz"),
-           "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault"), ".csv"),
+           "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault", "dip"), ".csv"),
            "andes_gfm": (HERE.parent / "andes_gfm", ("line_trip", "load_step", "gen_trip"), ".csv.gz")}
 BENCH = next((a for a in sys.argv[1:] if not a.startswith("-")), "andes_ibr_validate")
 MODEL_ERROR = next((float(a.split("=")[1]) for a in sys.argv[1:] if a.startswith("--model-error=")), None)

@@ -85,6 +85,22 @@ def test_planted_kqv_is_found_again_on_the_fault():
     assert decision.cost_after.sum() < 0.1 * decision.cost_before.sum()
 
 
+def test_planted_kqv_above_is_found_again_on_the_shallow_dip():
+    """Kqv x1.3 in the .dyr: on the shallower dip (|V| 0.74 pu, below Vdip) the injection stays
+    inside Iqh1 for both values, so the dip identifies Kqv and the filed value is within 10 % of
+    ANDES's (the same programs as the test above: one event of 2.5 s)."""
+    unit, specs, _ = _plant(1.3)
+    events = _events("dip")
+    ranking = rank(unit, specs, events, SETTINGS, CAL)
+    assert ranking.identifiable.tolist() == [True]
+    decision = calibrate_where_rejected(unit, specs, events, SETTINGS, CAL, free=ranking.identifiable)
+    assert decision.changed == ["Kqv"] and decision.refused is None
+    kqv = float(decision.unit.electrical.kqv)
+    assert abs(kqv - 2.0) / 2.0 < 0.10, kqv
+    lo, hi = decision.fit.ci95[0]
+    assert lo <= 2.0 <= hi and not lo <= 2.6 <= hi
+
+
 def test_kqv_without_a_voltage_dip_is_left_with_its_reason():
     """The load step keeps |V| inside [Vdip, Vup]: Kqv does not move P or Q; it is not
     identifiable, and the sentence says why (validate then leaves it at its .dyr value). Two
