@@ -391,7 +391,10 @@ def _capacity_row(s: dict, rate: int, n: int, streams: int, wall: float, cpu_s: 
             "inertia_delay_s": s.get("inertia_delay_s"), "updates": s["updates"], "wall_s": round(wall, 1),
             "process_cpu_s": None if cpu_s is None else round(cpu_s, 1),
             "peak_rss_mib": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0, 1),
-            "busy_fraction": p.get("mean", np.nan) * rate * streams / 1e3 if p else None,   # frames of every stream
+            # frames of every stream, and the restarted units' chunks run between them
+            "catch_up_s": s.get("catch_up_s"),
+            "busy_fraction": (p.get("mean", np.nan) * rate * streams / 1e3 + s.get("catch_up_s", 0.0) / wall
+                              if p else None),
             "keeps_up": bool(d) and d.get("max", np.inf) <= KEEP_UP_DELAY_S}
 
 

@@ -17,11 +17,11 @@ unit, as the file readers do (``jaxdse._io.measurement``):
 * a segment's first chunk waits for the segment's first ``qss_window_s`` (at most
   ``window_s``: :meth:`~jaxdse._core.windowed.WindowSettings.start_samples`), which give T_ref
   and the governor's initial state; the chunks behind it then follow one per frame;
-* with ``defer`` (the live monitor), a unit that restarts while others of its group already
-  have estimates is background work: its chunks wait for :meth:`OnlineGroup.catch_up`, which
-  the monitor calls when no frame is waiting, so that a restart's first chunk and catch-up
-  never delay the estimates in service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is
-  served with the frames again.
+* with ``defer`` (the live monitor), a few units (the small batch's) that restart while others
+  of their group already have estimates are background work: their chunks wait for
+  :meth:`OnlineGroup.catch_up`, which the monitor calls when no frame is waiting, so that a
+  restart's first chunk and catch-up do not delay the estimates in service; a unit whose
+  backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again.
 
 After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
 intervals and the verdict of the window). Three compiled programs per group: a segment's first
@@ -351,10 +351,13 @@ class OnlineGroup:
     def _chunks(self, defer: bool | None = None) -> list[Update]:
         ready, span = self._ready()
         if (self.defer if defer is None else defer) and ready.any():
-            # units in a new segment while others are in service: background, up to the lag
+            # a few units in a new segment (the small batch's) while others are in service:
+            # background, up to the lag (a whole-batch restart runs with the frames, once)
             filling = self.filled < self.window.blocks
             behind = self.last_valid - (self.slice_start + span - 1)
-            ready &= ~(filling & (behind < self.lag) & (~filling).any())
+            later = ready & filling & (behind < self.lag)
+            if (~filling).any() and later.sum() <= self.small:
+                ready &= ~later
         if not ready.any():
             return []
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
