@@ -35,6 +35,11 @@ def _interconnection(r: dict) -> str:
         d = r["steady_inertia_delay_s"]
         text += (f"; the area estimates {d['median']:.2f} s median, 99 % {d['p99']:.2f} s, max "
                  f"{d['max']:.2f} s after their time")
+        whole = r.get("inertia_delay_s")
+        if whole:
+            text += f" (over the whole run, the start included: 99 % {whole['p99']:.1f} s)"
+    if r.get("catch_up_s") is not None:
+        text += f"; restarted units' chunks run between frames: {r['catch_up_s']:.1f} s"
     p = r["processing_ms_per_frame"]
     text += f"; processing per frame median {p['median']:.2f} ms, 99 % {p['p99']:.1f} ms"
     if cpu:
