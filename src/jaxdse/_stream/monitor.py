@@ -822,6 +822,10 @@ class CsvRows:
             self.proc = None
 
 
+_encode = json.JSONEncoder(check_circular=False).encode
+"""json.dumps's text for the flat lines of ``updates.jsonl``, without the check for cycles."""
+
+
 def update_line(u: Update, alarm: bool, delay_s: float | None = None, wall_delay_s: float | None = None) -> dict:
     """One line of ``updates.jsonl``; ``delay_s``: from the window's last frame to this update,
     in seconds of stream time (:class:`StreamClock`); ``wall_delay_s``: the same in wall seconds."""
@@ -904,6 +908,7 @@ class Monitor:
         stream's clock (:class:`StreamClock`); ``timed``: count it in the summary (not for the
         last frames flushed at the stop, which waited for it)."""
         now = pace = None
+        rows = []
         if stream is not None and updates:
             w = time.monotonic()
             now = stream.clock.now(w)
@@ -925,10 +930,11 @@ class Monitor:
             self.latest[u.unit] = u
             line = update_line(u, alarm, delay, wall)
             if self._jsonl is not None:
-                self._jsonl.write(json.dumps(line) + "\n")
+                rows.append(_encode(line))
             if self.view is not None:
                 self.view.add(line)
-        if updates and self._jsonl is not None:
+        if rows:     # one write per call (a write per line: 6 % of the main thread at 4,788 units)
+            self._jsonl.write("\n".join(rows) + "\n")
             self._jsonl.flush()
         if updates and self.publisher is not None:
             by_t = defaultdict(list)
