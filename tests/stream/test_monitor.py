@@ -126,6 +126,21 @@ def test_short_gaps_are_bridged_long_ones_restart(example):
     assert second[0].t - (BASE + 1020) / 25 >= 20.0
 
 
+def _pair_with_a_restart(example, monkeypatch):
+    """70 s of the example for two units, unit 1 unusable for 0.8 s at 40 s (it restarts), with a
+    1-row small batch for a group of 2 (``online.SMALL_SHARE``): (generator, recording, window,
+    usable [samples, 2])."""
+    from jaxdse._stream import online
+
+    _, g, rec = example
+    rec = _head(rec, 1750)
+    usable = np.ones((1750, 2), bool)
+    usable[1000:1020, 1] = False
+    monkeypatch.setattr(online, "MIN_SMALL", 2)
+    monkeypatch.setattr(online, "SMALL_SHARE", 2)
+    return g, rec, WindowSettings(update_s=1.0, window_s=20.0), usable
+
+
 def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, monkeypatch):
     """A unit restarted by a long gap catches up one chunk a frame while the others wait: those
     chunks run on the group's small batch (its rows gathered, the results scattered back), and
@@ -133,13 +148,7 @@ def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, mo
     group of 2 units with a 1-row small batch)."""
     from jaxdse._stream import online
 
-    _, g, rec = example
-    rec = _head(rec, 1750)                                     # 70 s
-    window = WindowSettings(update_s=1.0, window_s=20.0)
-    usable = np.ones((1750, 2), bool)
-    usable[1000:1020, 1] = False                               # 0.8 s: unit 1 restarts
-    monkeypatch.setattr(online, "MIN_SMALL", 2)
-    monkeypatch.setattr(online, "SMALL_SHARE", 2)
+    g, rec, window, usable = _pair_with_a_restart(example, monkeypatch)
     taken = []
     take = online._take
     monkeypatch.setattr(online, "_take", lambda *a: taken.append(1) or take(*a))
@@ -175,13 +184,7 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
     ``BACKGROUND_LAG_S``, here 2 s), and both get the updates they get alone."""
     from jaxdse._stream import online
 
-    _, g, rec = example
-    rec = _head(rec, 1750)                                     # 70 s
-    window = WindowSettings(update_s=1.0, window_s=20.0)
-    usable = np.ones((1750, 2), bool)
-    usable[1000:1020, 1] = False                               # 0.8 s: unit 1 restarts
-    monkeypatch.setattr(online, "MIN_SMALL", 2)
-    monkeypatch.setattr(online, "SMALL_SHARE", 2)
+    g, rec, window, usable = _pair_with_a_restart(example, monkeypatch)
     monkeypatch.setattr(online, "BACKGROUND_LAG_S", 2.0)
     now, later = (OnlineGroup(["a", "b"], [g.plant] * 2, [rec.location] * 2, 25.0, window, defer=d)
                   for d in (False, True))
