@@ -124,7 +124,9 @@ def _q_discs(plants, dt):
 
 @eqx.filter_jit
 def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict_settings):
-    """Push each ready unit's block into its ring; the window estimate and verdict of every unit."""
+    """Push each ready unit's block into its ring; the window estimate and verdict of every unit,
+    or zeros where no unit's window is full (nothing is reported then: while every window fills,
+    at a start and in a restart's catch-up, a chunk skips the estimate's cost)."""
     n = window.blocks
     pos = filled % n
     units = jnp.arange(filled.shape[0])
@@ -141,7 +143,13 @@ def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict
         ident_ = window_estimate(b, p, plant, ident, window, c.t_ref, c.t_m0)
         return ident_, verdict(None, ident_, None, verdict_settings)
 
-    idents, verdicts = jax.vmap(one)(ordered, present, plants, carries)
+    def estimate():
+        return jax.vmap(one)(ordered, present, plants, carries)
+
+    def nothing():
+        return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(estimate))
+
+    idents, verdicts = jax.lax.cond(jnp.any(filled >= n), estimate, nothing)
     return ring, filled, idents, verdicts
 
 
