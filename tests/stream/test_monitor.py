@@ -64,10 +64,25 @@ def _feed(g, rec, window, usable=None):
     return out
 
 
-def test_windowed_estimate_is_right_and_covers(example):
+def test_windowed_estimate_is_right_and_covers(example, monkeypatch):
+    """...and while the window fills, the chunks skip the window estimate (zeros, unreported)."""
+    import jaxdse._stream.online as online
+
+    calls, absorb = [], online._absorb
+
+    def spy(*args):
+        out = absorb(*args)
+        calls.append((int(np.max(out[1])), float(np.max(np.abs(np.asarray(out[2].h_s))))))
+        return out
+
+    monkeypatch.setattr(online, "_absorb", spy)
     _, g, rec = example
     ups = _feed(g, rec, WindowSettings(update_s=2.0, window_s=60.0))
     assert len(ups) > 20
+    blocks = WindowSettings(update_s=2.0, window_s=60.0).blocks
+    assert [h for n, h in calls if n < blocks] and all(h == 0.0 for n, h in calls if n < blocks)
+    full = [h for n, h in calls if n >= blocks]
+    assert len(full) == len(ups) and all(h > 0 for h in full)
     first = ups[0]
     assert first.t - BASE / 25 >= 60.0 - 1e-9          # the first estimate once the window is full
     assert np.allclose(np.diff([u.t for u in ups]), 2.0)
