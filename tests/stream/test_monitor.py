@@ -65,7 +65,8 @@ def _feed(g, rec, window, usable=None):
 
 
 def test_windowed_estimate_is_right_and_covers(example, monkeypatch):
-    """...and while the window fills, the chunks skip the window estimate (zeros, unreported)."""
+    """H right and covered once the window is full; while it fills, the chunks skip the window
+    estimate (zeros, unreported)."""
     import jaxdse._stream.online as online
 
     calls, absorb = [], online._absorb
@@ -77,11 +78,12 @@ def test_windowed_estimate_is_right_and_covers(example, monkeypatch):
 
     monkeypatch.setattr(online, "_absorb", spy)
     _, g, rec = example
-    ups = _feed(g, rec, WindowSettings(update_s=2.0, window_s=60.0))
+    window = WindowSettings(update_s=2.0, window_s=60.0)
+    ups = _feed(g, rec, window)
     assert len(ups) > 20
-    blocks = WindowSettings(update_s=2.0, window_s=60.0).blocks
-    assert [h for n, h in calls if n < blocks] and all(h == 0.0 for n, h in calls if n < blocks)
-    full = [h for n, h in calls if n >= blocks]
+    filling = [h for n, h in calls if n < window.blocks]
+    assert filling and all(h == 0.0 for h in filling)
+    full = [h for n, h in calls if n >= window.blocks]
     assert len(full) == len(ups) and all(h > 0 for h in full)
     first = ups[0]
     assert first.t - BASE / 25 >= 60.0 - 1e-9          # the first estimate once the window is full
