@@ -72,3 +72,53 @@ def test_a_window_over_the_recording_gives_the_batch_h(hydro, stale):
     # With this governor model (its correction is -90 %), the windowed fit's low-pass of the
     # governor input, chunk by chunk with a 1 s lookahead, leaves H 0.2 % off the batch fit's.
     assert float(batch.h_s) == pytest.approx(ups[0].h_s, rel=2.5e-3)
+
+
+def test_a_segments_first_slice_gives_its_chunks_blocks_in_one_pass(hydro, monkeypatch):
+    """The first slice of a segment (T_ref's 30 s) holds 14 chunks of 2 s: one call gives their
+    blocks and carry as 14 calls of one chunk each do, and the group makes that call alone, with
+    no burst of chunk calls behind it (at a start, every unit of every stream gets there at once).
+    Not bit for bit: the one-chunk calls see the one-sided derivative at their slice's end, in the
+    last samples of each lookahead, which the one pass has centred."""
+    from jaxdse._core.windowed import halo, window_chunk
+    from jaxdse._stream import online
+
+    g, rec = hydro
+    window = WindowSettings(update_s=2.0, window_s=118.0)
+    settings, cfg = jd.Settings(), jd.ObserverConfig()
+    size, lead = window.chunk_samples(25.0), halo(settings)
+    span = lead + size + window.tail_samples(25.0, settings)
+    start = window.start_samples(25.0, settings)
+    chunks = 1 + start // size
+    assert chunks == 14
+
+    def cut(a, b):   # a slice on the stream's own time axis, as the monitor cuts them
+        return jd.Recording(t_s=np.arange(b - a) / 25.0, v_mag_pu=rec.v_mag_pu[a:b], v_ang_rad=rec.v_ang_rad[a:b],
+                            i_mag_pu=rec.i_mag_pu[a:b], i_ang_rad=rec.i_ang_rad[a:b], f_hz=rec.f_hz[a:b],
+                            location=rec.location)
+
+    run = eqx.filter_jit(lambda r, c, k: window_chunk(r, g.plant, cfg, settings, OLS, c, size, 0 if c else start,
+                                                      chunks=k))
+    blocks, carry = [], None
+    for k in range(chunks):
+        b, carry = run(cut(k * size, k * size + span + (0 if carry else start)), carry, 1)
+        blocks.append(b)
+    together, last = run(cut(0, span + start), None, chunks)
+    for name in ("normal", "rhs", "zz", "z", "count"):
+        want = np.stack([np.asarray(getattr(b, name)) for b in blocks])
+        np.testing.assert_allclose(getattr(together, name), want, rtol=0, atol=1e-7 * np.max(np.abs(want)))
+    # the carry's governor input: the lookahead's edge, decayed over its 1 s (exp(-0.71 w t), 1e-4)
+    for a, b in zip(jax.tree_util.tree_leaves(carry), jax.tree_util.tree_leaves(last)):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-3 * np.max(np.abs(np.asarray(a))))
+
+    calls = []
+    for name in ("_first", "_next"):
+        real = getattr(online, name)
+        monkeypatch.setattr(online, name, lambda *a, real=real, name=name: calls.append((name, k)) or real(*a))
+    grp = OnlineGroup([g.name], [g.plant], [rec.location], 25.0, window, identify_settings=OLS)
+    for k in range(span + start + 3 * size):
+        grp.push(k, [rec.v_mag_pu[k]], [rec.v_ang_rad[k]], [rec.i_mag_pu[k]], [rec.i_ang_rad[k]], [rec.f_hz[k]],
+                 [True])
+    # the first slice's call, then one call per chunk as its samples come (chunk 14 ends 25
+    # samples after the first slice)
+    assert calls == [("_first", span + start - 1)] + [("_next", (chunks + j) * size + span - 1) for j in (0, 1, 2)]

@@ -156,8 +156,9 @@ def halo(settings: Settings) -> int:
 
 def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings: Settings,
                  identify_settings: IdentifySettings, carry: Carry | None, size: int,
-                 start: int = 0, q_disc=None) -> tuple[Blocks, Carry]:
-    """One chunk of a stream: its block of sufficient statistics and the carry to the next.
+                 start: int = 0, q_disc=None, chunks: int = 1) -> tuple[Blocks, Carry]:
+    """One chunk of a stream (or ``chunks`` in a row): its block of sufficient statistics and
+    the carry to the next.
 
     Arguments:
         rec: the slice: :func:`halo` samples (the derivative window), the chunk's ``size`` own
@@ -170,6 +171,10 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
             ``qss_window_s``, and the governor's state comes from the slice's quiet part
             (:func:`~jaxdse._core.identify.governor_start`), as the batch fit's do.
         start: see ``rec`` (:meth:`WindowSettings.start_samples`; 0 with a carry).
+        chunks: consecutive chunks that the slice's samples hold (static; a segment's first
+            slice holds ``1 + start // size``): one pass over them gives the blocks and the
+            carry of as many calls, one chunk each (each chunk's lookahead pass included), and
+            every field of the blocks then has a leading axis of ``chunks``. 1: no such axis.
         q_disc: the q-axis circuits' discretisation at the stream's step
             (:func:`~jaxdse._core.algebraic.q_axis_discretisation`), computed once for a
             stream; None: here (``plant.machine.q_axis`` only).
@@ -183,12 +188,17 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     ts = rec.t_s
     dt = ts[1] - ts[0]
     lead = halo(settings)
+    own = chunks * size
+    tail = ts.shape[0] - start - lead - size
+    if own + tail > ts.shape[0] - lead:
+        raise ValueError(f"window_chunk: {chunks} chunks of {size} samples need {lead + own + tail} samples, "
+                         f"the slice has {ts.shape[0]}")
 
     def cut(x):
-        return jax.lax.dynamic_slice_in_dim(x, lead, size)
+        return jax.lax.dynamic_slice_in_dim(x, lead, own)
 
     te, x2 = cut(fe.alg.t_e_pu), cut(fe.x2_meas)
-    x2_ahead = fe.x2_meas[lead:ts.shape[0] - start]               # own samples and the lookahead
+    x2_ahead = fe.x2_meas[lead:lead + own + tail]                 # own samples and the lookahead
     gov = plant.governor
     smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
     if carry is None:   # at rest at the segment's first own sample
@@ -202,7 +212,10 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
         t_ref, x2_prev, smooth0, dw_prev = carry.t_ref, carry.x2, carry.smooth, carry.dw
         gov0, t_m0, elapsed = carry.governor, carry.t_m0, carry.elapsed
     smooth = filter_states(smoothing, jnp.concatenate([x2_prev[None], x2_ahead]), x0=smooth0)[1:]
-    dw = filter_states(smoothing, smooth[:, 0], reverse=True)[:size, 0] / m.omega_s
+    # each chunk's backward pass starts at the end of its own lookahead
+    ahead = jnp.arange(chunks)[:, None] * size + jnp.arange(size + tail)[None, :]
+    dw = jax.vmap(lambda x: filter_states(smoothing, x, reverse=True)[:size, 0])(smooth[ahead, 0])
+    dw = dw.reshape(own) / m.omega_s
 
     def heun(x, d):   # governor_torque's step, from a carried state
         x = _heun(gov, dt, t_ref)(x, d)
@@ -217,7 +230,7 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     derived = rec.f_hz is None
     bus = jnp.zeros_like(te) if derived else 2.0 * jnp.pi * (cut(fe.f_hz) - m.f_nominal_hz)
     rotor = cut(fe.alg.delta_rad) if derived else cut(fe.alg.delta_rad - fe.theta_ref)
-    u = jnp.stack([bus, rotor, t_m - te, jnp.ones_like(te), t_m - t_m0])   # [5, size]
+    u = jnp.stack([bus, rotor, t_m - te, jnp.ones_like(te), t_m - t_m0])   # [5, own]
     discs = _filters(config, s, dt)
     if carry is None:
         u_prev = u[:, 0]
@@ -227,21 +240,25 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     u_all = jnp.concatenate([u_prev[:, None], u], axis=1)
 
     def one_filter(disc, x0_f):
-        states = jax.vmap(lambda uu, xx: filter_states(disc, uu, x0=xx)[1:])(u_all, x0_f)  # [5, size, 3]
+        states = jax.vmap(lambda uu, xx: filter_states(disc, uu, x0=xx)[1:])(u_all, x0_f)  # [5, own, 3]
         row, z = _design_row(lambda signal, order: states[signal][:, order])
         return jnp.stack(row, axis=1), z, states[:, -1]   # [5, 3] at the last own sample
 
     designs, zs, last = jax.vmap(one_filter)(discs, x0)
-    k = elapsed + jnp.arange(size)
-    w = (k * dt >= s.settle_s).astype(u.dtype)
-    blocks = Blocks(normal=jnp.einsum("ftp,ftq,t->fpq", designs, designs, w),
-                    rhs=jnp.einsum("ftp,ft,t->fp", designs, zs, w),
-                    zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w),
-                    count=jnp.sum(w))
-    new = Carry(context=next_context(fe, ctx, size), filters=last, signals=u[:, -1],
-                smooth=smooth[size - 1], x2=x2[-1],
+    k = elapsed + jnp.arange(own)
+    w = (k * dt >= s.settle_s).astype(u.dtype).reshape(chunks, size)
+    designs = designs.reshape(designs.shape[0], chunks, size, -1)    # [filters, chunks, size, 4]
+    zs = zs.reshape(zs.shape[0], chunks, size)
+    blocks = Blocks(normal=jnp.einsum("fktp,fktq,kt->kfpq", designs, designs, w),
+                    rhs=jnp.einsum("fktp,fkt,kt->kfp", designs, zs, w),
+                    zz=jnp.einsum("fkt,fkt,kt->kf", zs, zs, w), z=jnp.einsum("fkt,kt->kf", zs, w),
+                    count=jnp.sum(w, axis=1))
+    if chunks == 1:
+        blocks = jax.tree_util.tree_map(lambda b: b[0], blocks)
+    new = Carry(context=next_context(fe, ctx, own), filters=last, signals=u[:, -1],
+                smooth=smooth[own - 1], x2=x2[-1],
                 governor=jax.tree_util.tree_map(lambda x: x[-1], gov_states),
-                dw=dw[-1], t_ref=t_ref, t_m0=t_m0, elapsed=elapsed + size)
+                dw=dw[-1], t_ref=t_ref, t_m0=t_m0, elapsed=elapsed + own)
     return blocks, new
 
 

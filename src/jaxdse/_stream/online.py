@@ -16,18 +16,21 @@ unit, as the file readers do (``jaxdse._io.measurement``):
   next chunk boundary;
 * a segment's first chunk waits for the segment's first ``qss_window_s`` (at most
   ``window_s``: :meth:`~jaxdse._core.windowed.WindowSettings.start_samples`), which give T_ref
-  and the governor's initial state; the chunks behind it then follow one per frame;
+  and the governor's initial state; the same call gives the blocks of every chunk those samples
+  hold (one pass over them, not one call per chunk: at a start, every unit of every stream
+  reaches it in the same second), and the chunks after them follow as the frames come;
 * with ``defer`` (the live monitor), a few units (the small batch's) that restart while others
   of their group already have estimates are background work: their chunks wait for
   :meth:`OnlineGroup.catch_up`, which the monitor calls when no frame is waiting, so that a
-  restart's first chunk and catch-up do not delay the estimates in service; a unit whose
+  restart's chunks do not delay the estimates in service; a unit whose
   backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again.
 
-After each chunk, a unit whose window is full gets an :class:`Update` (H and D with their 95 %
-intervals and the verdict of the window). Three compiled programs per group: a segment's first
-chunk, the chunks after it, and the window estimate; each on the whole group and, for a chunk
-that few units are ready for (a restarted unit catching up), on a small batch
-(:data:`SMALL_SHARE`).
+Each chunk's block goes into its unit's ring of the window's blocks, in place; after it, a unit
+whose window is full gets an :class:`Update` (H and D with their 95 % intervals and the verdict
+of the window), from the window estimate, which runs only then. Three compiled programs per
+group besides the pushes: a segment's first chunk, the chunks after it, and the window
+estimate; each on the whole group and, for a chunk that few units are ready for (a restarted
+unit; a late sample), on a small batch (:data:`SMALL_SHARE`).
 """
 
 from __future__ import annotations
@@ -103,8 +106,9 @@ def _per_unit(chunk, recs, *batched):
 
 
 @eqx.filter_jit
-def _first(recs, plants, q_disc, config, settings, ident, size, start):
-    return _per_unit(lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q),
+def _first(recs, plants, q_disc, config, settings, ident, size, start, chunks):
+    """A segment's first slice: the blocks of its first ``chunks`` chunks ([U, chunks, ...]) in one pass."""
+    return _per_unit(lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q, chunks),
                      recs, plants, q_disc)
 
 
@@ -122,18 +126,33 @@ def _q_discs(plants, dt):
     return jax.vmap(lambda m: q_axis_discretisation(m, dt))(plants.machine)
 
 
+def _leading(mask, x):
+    return mask.reshape((-1,) + (1,) * (x.ndim - 1))
+
+
+@functools.partial(jax.jit, donate_argnums=0)
+def _push(ring, pos, blocks, ready):
+    """Each ready unit's block into its ring at ``pos`` [U] (``filled % blocks``), in place: the
+    rings are donated (a copy of a thousand units' rings cost a chunk tens of milliseconds)."""
+    units = jnp.arange(pos.shape[0])
+    return jax.tree_util.tree_map(lambda r, b: r.at[units, pos].set(jnp.where(_leading(ready, b), b, r[units, pos])),
+                                  ring, blocks)
+
+
+@functools.partial(jax.jit, donate_argnums=0)
+def _push_first(ring, blocks, ready):
+    """A segment's first blocks ([U, k, ...], k < the window's blocks) into the empty rings of
+    the ready units, in place."""
+    k = jax.tree_util.tree_leaves(blocks)[0].shape[1]
+    return jax.tree_util.tree_map(lambda r, b: r.at[:, :k].set(jnp.where(_leading(ready, b), b, r[:, :k])),
+                                  ring, blocks)
+
+
 @eqx.filter_jit
-def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict_settings):
-    """Push each ready unit's block into its ring; the window estimate and verdict of every unit,
-    or zeros where no unit's window is full (nothing is reported then: while every window fills,
-    at a start and in a restart's catch-up, a chunk skips the estimate's cost)."""
+def _estimates(ring, filled, carries, plants, ident, window, verdict_settings):
+    """The window estimate and verdict of every unit from its ring (called once a unit's window
+    is full: while every window fills, at a start, a chunk costs no estimate)."""
     n = window.blocks
-    pos = filled % n
-    units = jnp.arange(filled.shape[0])
-    ring = jax.tree_util.tree_map(
-        lambda r, b: r.at[units, pos].set(jnp.where(ready.reshape((-1,) + (1,) * (b.ndim - 1)), b, r[units, pos])),
-        ring, blocks)
-    filled = filled + ready.astype(filled.dtype)
     order = (filled[:, None] + jnp.arange(n)[None, :]) % n          # oldest first once full
     ordered = jax.tree_util.tree_map(lambda r: jnp.take_along_axis(
         r, order.reshape(order.shape + (1,) * (r.ndim - 2)), axis=1), ring)
@@ -143,22 +162,15 @@ def _absorb(ring, filled, blocks, ready, carries, plants, ident, window, verdict
         ident_ = window_estimate(b, p, plant, ident, window, c.t_ref, c.t_m0)
         return ident_, verdict(None, ident_, None, verdict_settings)
 
-    def estimate():
-        return jax.vmap(one)(ordered, present, plants, carries)
-
-    def nothing():
-        return jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(estimate))
-
-    idents, verdicts = jax.lax.cond(jnp.any(filled >= n), estimate, nothing)
-    return ring, filled, idents, verdicts
+    return jax.vmap(one)(ordered, present, plants, carries)
 
 
 SMALL_SHARE = 8
-"""A chunk that only a few units of a group are ready for (a restarted unit catching up, one
-chunk a frame, on the others; a unit whose sample came late) runs on a batch of
-ceil(U / SMALL_SHARE) rows, the ready units' (the first repeated to fill it), gathered and
-scattered back, not on the group's whole batch: at 966 units a restarted plant's 46 copies cost
-a 3.9 s first chunk and 28 whole-batch chunks after it. Groups of ``MIN_SMALL`` units or more."""
+"""A chunk that only a few units of a group are ready for (a restarted unit's; a unit whose
+sample came late) runs on a batch of ceil(U / SMALL_SHARE) rows, the ready units' (the first
+repeated to fill it), gathered and scattered back, not on the group's whole batch: at 966 units
+a restarted plant's 46 copies cost a 3.9 s whole-batch first chunk. Groups of ``MIN_SMALL``
+units or more."""
 MIN_SMALL = 16
 BACKGROUND_LAG_S = 15.0
 """The stream time a deferred unit's chunks may fall behind the frames [s] (buffer room:
@@ -191,6 +203,8 @@ class OnlineGroup:
         self.max_gap = int(math.floor(max_gap_s * self.rate + 1e-6))
         self.with_frequency = with_frequency
         self.span = self.halo + self.size + self.tail
+        # the chunks that a segment's first slice holds (fewer than a window's: no estimate yet)
+        self.first_chunks = max(1, min(1 + self.start // self.size, self.window.blocks - 1))
         self.defer = defer
         self.lag = int(round(BACKGROUND_LAG_S * self.rate)) if defer else 0
         self.capacity = self.span + self.start + self.size + self.max_gap + 2 + self.lag
@@ -280,16 +294,17 @@ class OnlineGroup:
                              f_hz=one * f_nom if self.with_frequency else None, location=self.location)
 
         def programs(n, plants, q_disc):
-            blocks, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config, self.settings,
-                                     self.ident, self.size, self.start)
+            first, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config, self.settings,
+                                    self.ident, self.size, self.start, self.first_chunks)
             blocks, carries = _next(flat(self.span, n), plants, q_disc, carries, self.config, self.settings,
                                     self.ident, self.size)
             ring = _empty_ring(blocks, self.window.blocks)
             if n == self.u:
                 _where(jnp.ones(n, bool), carries, carries)
-            ring, _, _, _ = jax.block_until_ready(_absorb(
-                ring, np.zeros(n, np.int32), blocks, jnp.ones(n, bool), carries, plants, self.ident, self.window,
-                self.verdict_settings))
+            ring = _push_first(ring, first, jnp.ones(n, bool))
+            ring = _push(ring, jnp.zeros(n, np.int32), blocks, jnp.ones(n, bool))
+            jax.block_until_ready(_estimates(ring, jnp.zeros(n, np.int32), carries, plants, self.ident, self.window,
+                                             self.verdict_settings))
             return carries, ring
 
         carries, ring = programs(self.u, self.plants, self.q_disc)
@@ -349,7 +364,7 @@ class OnlineGroup:
         return (self.slice_start >= 0) & (self.last_valid >= self.slice_start + span - 1), span
 
     def behind(self) -> bool:
-        """Whether chunks are ready that no push ran: deferred ones, or a catch-up's next."""
+        """Whether chunks are ready that no push ran (deferred ones)."""
         return bool(self._ready()[0].any())
 
     def catch_up(self) -> list[Update]:
@@ -371,8 +386,10 @@ class OnlineGroup:
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
         # a segment's first chunks, then the others: each set on the whole batch or the small one
         out = self._run(ready & ~self.started, t_end) + self._run(ready & self.started, t_end)
+        first = ready & ~self.started
         self.started |= ready
-        self.slice_start = np.where(ready, self.slice_start + self.size, self.slice_start)
+        self.slice_start = np.where(ready, self.slice_start + np.where(first, self.first_chunks, 1) * self.size,
+                                    self.slice_start)
         return [u for _, u in sorted(out, key=lambda x: x[0])]
 
     def _run(self, ready, t_end) -> list[tuple[int, Update]]:
@@ -388,29 +405,37 @@ class OnlineGroup:
         if first:
             recs = self._batch(rows, ready[rows], self.span + self.start)
             blocks, carries = _first(recs, plants, q_disc, self.config, self.settings, self.ident, self.size,
-                                     self.start)
+                                     self.start, self.first_chunks)
         else:
             recs = self._batch(rows, ready[rows], self.span)
             blocks, carries = _next(recs, plants, q_disc, self.carries if whole else _take(self.carries, rows),
                                     self.config, self.settings, self.ident, self.size)
         if self.carries is None:     # every row from the first ready unit's until its own chunk
-            self.carries, self.ring = _take((carries, _empty_ring(blocks, self.window.blocks)),
+            one = jax.tree_util.tree_map(lambda b: b[:, 0], blocks) if first else blocks
+            self.carries, self.ring = _take((carries, _empty_ring(one, self.window.blocks)),
                                             np.arange(self.u) if whole else np.zeros(self.u, np.int64))
+        n = self.window.blocks
         if whole:
             self.carries = _where(jnp.asarray(ready), carries, self.carries)
-            self.ring, filled, idents, verdicts = _absorb(
-                self.ring, self.filled, blocks, jnp.asarray(ready), self.carries, self.plants, self.ident,
-                self.window, self.verdict_settings)
-            self.filled = np.array(filled)
-            pos = units
-        else:     # every row is ready
-            ring, filled, idents, verdicts = _absorb(
-                _take(self.ring, rows), self.filled[rows], blocks, jnp.ones(rows.size, bool), carries, plants,
-                self.ident, self.window, self.verdict_settings)
+            if first:
+                self.ring = _push_first(self.ring, blocks, jnp.asarray(ready))
+            else:
+                self.ring = _push(self.ring, jnp.asarray(self.filled % n), blocks, jnp.asarray(ready))
+            self.filled = np.where(ready, self.first_chunks if first else self.filled + 1, self.filled).astype(np.int32)
+            ring, filled, carries, pos = self.ring, self.filled, self.carries, units
+        else:     # every row is ready (a row given twice: the same values)
+            ring, ones = _take(self.ring, rows), jnp.ones(rows.size, bool)
+            ring = _push_first(ring, blocks, ones) if first else _push(ring, jnp.asarray(self.filled[rows] % n),
+                                                                       blocks, ones)
+            self.filled[rows] = self.first_chunks if first else self.filled[rows] + 1
+            filled = self.filled[rows]
             self.carries, self.ring = _put((self.carries, self.ring), rows, (carries, ring))
-            self.filled[rows] = np.asarray(filled)
             pos = np.arange(units.size)      # np.resize put the ready units first
-        done = self.filled[units] >= self.window.blocks
+        done = self.filled[units] >= n
+        if not done.any():
+            return []
+        idents, verdicts = _estimates(ring, jnp.asarray(filled), carries, plants,
+                                      self.ident, self.window, self.verdict_settings)
         return list(zip(units[done].tolist(), self._updates(units[done], pos[done], idents, verdicts, t_end)))
 
     def _updates(self, units, pos, idents, verdicts, t_end) -> list[Update]:
