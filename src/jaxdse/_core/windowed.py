@@ -194,71 +194,70 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
         raise ValueError(f"window_chunk: {chunks} chunks of {size} samples need {lead + own + tail} samples, "
                          f"the slice has {ts.shape[0]}")
 
-    def cut(x):
-        return jax.lax.dynamic_slice_in_dim(x, lead, own)
-
-    te, x2 = cut(fe.alg.t_e_pu), cut(fe.x2_meas)
-    x2_ahead = fe.x2_meas[lead:lead + own + tail]                 # own samples and the lookahead
     gov = plant.governor
     smoothing = hold_discretisation(*butterworth2(s.governor_smoothing_hz, ts.dtype), dt)
+    discs = _filters(config, s, dt)
+    derived = rec.f_hz is None
+    bus_all = jnp.zeros_like(ts) if derived else 2.0 * jnp.pi * (fe.f_hz - m.f_nominal_hz)
+    rotor_all = fe.alg.delta_rad if derived else fe.alg.delta_rad - fe.theta_ref
     if carry is None:   # at rest at the segment's first own sample
         t_ref = reference_torque(ts, fe, gov, settings)   # the batch fit's, as far as the slice goes
-        x2_prev, smooth0 = x2[0], jnp.stack([x2[0], 0.0])
         dw_start = governor_input(fe, plant, smoothing, lead)   # the batch fit's, over the slice
         gov0 = governor_start(gov, fe, dw_start, dt, t_ref, lead, ts.shape[0])
-        dw_prev = dw_start[lead]
-        t_m0, elapsed = gov.torque(gov0, dw_prev), jnp.zeros((), jnp.int32)
+        t_m0 = gov.torque(gov0, dw_start[lead])
+        x2_0 = fe.x2_meas[lead]
+        state = (jnp.stack([x2_0, 0.0]), x2_0, gov0, dw_start[lead], None, None, jnp.zeros((), jnp.int32))
     else:
-        t_ref, x2_prev, smooth0, dw_prev = carry.t_ref, carry.x2, carry.smooth, carry.dw
-        gov0, t_m0, elapsed = carry.governor, carry.t_m0, carry.elapsed
-    smooth = filter_states(smoothing, jnp.concatenate([x2_prev[None], x2_ahead]), x0=smooth0)[1:]
-    # each chunk's backward pass starts at the end of its own lookahead
-    ahead = jnp.arange(chunks)[:, None] * size + jnp.arange(size + tail)[None, :]
-    dw = jax.vmap(lambda x: filter_states(smoothing, x, reverse=True)[:size, 0])(smooth[ahead, 0])
-    dw = dw.reshape(own) / m.omega_s
+        t_ref, t_m0 = carry.t_ref, carry.t_m0
+        state = (carry.smooth, carry.x2, carry.governor, carry.dw, carry.filters, carry.signals, carry.elapsed)
 
     def heun(x, d):   # governor_torque's step, from a carried state
         x = _heun(gov, dt, t_ref)(x, d)
         return x, (x, gov.torque(x, d[1]))
 
-    if carry is None:   # gov0 is the state at the first own sample, as in the batch fit
-        _, (states, t_m) = jax.lax.scan(heun, gov0, (dw[:-1], dw[1:]))
-        gov_states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), gov0, states)
-        t_m = jnp.concatenate([gov.torque(gov0, dw[0])[None], t_m])
-    else:
-        _, (gov_states, t_m) = jax.lax.scan(heun, gov0, (jnp.concatenate([dw_prev[None], dw[:-1]]), dw))
-    derived = rec.f_hz is None
-    bus = jnp.zeros_like(te) if derived else 2.0 * jnp.pi * (cut(fe.f_hz) - m.f_nominal_hz)
-    rotor = cut(fe.alg.delta_rad) if derived else cut(fe.alg.delta_rad - fe.theta_ref)
-    u = jnp.stack([bus, rotor, t_m - te, jnp.ones_like(te), t_m - t_m0])   # [5, own]
-    discs = _filters(config, s, dt)
-    if carry is None:
-        u_prev = u[:, 0]
-        x0 = jnp.zeros((discs[0].shape[0], 5, 3), u.dtype).at[:, :, 0].set(u_prev)
-    else:
-        u_prev, x0 = carry.signals, carry.filters
-    u_all = jnp.concatenate([u_prev[:, None], u], axis=1)
-
-    def one_filter(disc, x0_f):
-        states = jax.vmap(lambda uu, xx: filter_states(disc, uu, x0=xx)[1:])(u_all, x0_f)  # [5, own, 3]
+    def one_filter(disc, x0_f, u_all):
+        states = jax.vmap(lambda uu, xx: filter_states(disc, uu, x0=xx)[1:])(u_all, x0_f)  # [5, size, 3]
         row, z = _design_row(lambda signal, order: states[signal][:, order])
         return jnp.stack(row, axis=1), z, states[:, -1]   # [5, 3] at the last own sample
 
-    designs, zs, last = jax.vmap(one_filter)(discs, x0)
-    k = elapsed + jnp.arange(own)
-    w = (k * dt >= s.settle_s).astype(u.dtype).reshape(chunks, size)
-    designs = designs.reshape(designs.shape[0], chunks, size, -1)    # [filters, chunks, size, 4]
-    zs = zs.reshape(zs.shape[0], chunks, size)
-    blocks = Blocks(normal=jnp.einsum("fktp,fktq,kt->kfpq", designs, designs, w),
-                    rhs=jnp.einsum("fktp,fkt,kt->kfp", designs, zs, w),
-                    zz=jnp.einsum("fkt,fkt,kt->kf", zs, zs, w), z=jnp.einsum("fkt,kt->kf", zs, w),
-                    count=jnp.sum(w, axis=1))
-    if chunks == 1:
-        blocks = jax.tree_util.tree_map(lambda b: b[0], blocks)
-    new = Carry(context=next_context(fe, ctx, own), filters=last, signals=u[:, -1],
-                smooth=smooth[own - 1], x2=x2[-1],
-                governor=jax.tree_util.tree_map(lambda x: x[-1], gov_states),
-                dw=dw[-1], t_ref=t_ref, t_m0=t_m0, elapsed=elapsed + own)
+    def chunk(state, k, first: bool):
+        """Chunk k of the slice: its block, and the state at its last own sample."""
+        smooth0, x2_prev, gov0, dw_prev, x0, u_prev, elapsed = state
+        at = lead + k * size
+
+        def cut(x):
+            return jax.lax.dynamic_slice_in_dim(x, at, size)
+
+        te, x2 = cut(fe.alg.t_e_pu), cut(fe.x2_meas)
+        x2_ahead = jax.lax.dynamic_slice_in_dim(fe.x2_meas, at, size + tail)   # own samples and the lookahead
+        smooth = filter_states(smoothing, jnp.concatenate([x2_prev[None], x2_ahead]), x0=smooth0)[1:]
+        dw = filter_states(smoothing, smooth[:, 0], reverse=True)[:size, 0] / m.omega_s
+        if first:   # gov0 is the state at the first own sample, as in the batch fit
+            _, (states, t_m) = jax.lax.scan(heun, gov0, (dw[:-1], dw[1:]))
+            gov_states = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), gov0, states)
+            t_m = jnp.concatenate([gov.torque(gov0, dw[0])[None], t_m])
+        else:
+            _, (gov_states, t_m) = jax.lax.scan(heun, gov0, (jnp.concatenate([dw_prev[None], dw[:-1]]), dw))
+        u = jnp.stack([cut(bus_all), cut(rotor_all), t_m - te, jnp.ones_like(te), t_m - t_m0])   # [5, size]
+        if first:
+            u_prev = u[:, 0]
+            x0 = jnp.zeros((discs[0].shape[0], 5, 3), u.dtype).at[:, :, 0].set(u_prev)
+        u_all = jnp.concatenate([u_prev[:, None], u], axis=1)
+        designs, zs, last = jax.vmap(one_filter, in_axes=(0, 0, None))(discs, x0, u_all)
+        w = ((elapsed + jnp.arange(size)) * dt >= s.settle_s).astype(u.dtype)
+        block = Blocks(normal=jnp.einsum("ftp,ftq,t->fpq", designs, designs, w),
+                       rhs=jnp.einsum("ftp,ft,t->fp", designs, zs, w),
+                       zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w), count=jnp.sum(w))
+        gov_last = jax.tree_util.tree_map(lambda x: x[-1], gov_states)
+        return (smooth[size - 1], x2[-1], gov_last, dw[-1], last, u[:, -1], elapsed + size), block
+
+    state, blocks = chunk(state, 0, carry is None)
+    if chunks > 1:   # the others in a loop: a chunk's arrays at a time, however long the slice
+        state, rest = jax.lax.scan(lambda st, k: chunk(st, k, False), state, jnp.arange(1, chunks))
+        blocks = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), blocks, rest)
+    smooth, x2, governor, dw, filters, signals, elapsed = state
+    new = Carry(context=next_context(fe, ctx, own), filters=filters, signals=signals, smooth=smooth, x2=x2,
+                governor=governor, dw=dw, t_ref=t_ref, t_m0=t_m0, elapsed=elapsed)
     return blocks, new
 
 
