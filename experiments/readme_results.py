@@ -24,7 +24,8 @@ def _interconnection(r: dict) -> str:
     off = r.get("backlog_worked_off_after_s")
     text = (f" A whole interconnection: {r['units']} units on {r['streams']} streams at "
             f"{r['frames_per_s']} frames/s for {r['seconds']:g} s with [inertia], recording off: the "
-            "start's backlog (every unit's first chunk in the same second) worked off "
+            "start's backlog (every unit's first chunk in the same second, run between frames) "
+            "worked off (the median delay of the unit updates under 2.5 s from then on) "
             + ("not within the run" if off is None else f"{off:g} s after the first update"))
     if st:
         d = st["delay_s"]
@@ -39,7 +40,7 @@ def _interconnection(r: dict) -> str:
         if whole:
             text += f" (over the whole run, the start included: 99 % {whole['p99']:.1f} s)"
     if r.get("catch_up_s") is not None:
-        text += f"; restarted units' chunks run between frames: {r['catch_up_s']:.1f} s"
+        text += f"; the start's and restarted units' chunks run between frames: {r['catch_up_s']:.1f} s"
     p = r["processing_ms_per_frame"]
     text += f"; processing per frame median {p['median']:.2f} ms, 99 % {p['p99']:.1f} ms"
     if cpu:

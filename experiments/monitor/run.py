@@ -414,28 +414,38 @@ start is the expensive part: each unit's first chunk processes the segment's fir
 ``--loop`` joins OSL case 1's end (90 s) to its start: 7031_coloeast's copies (its recording has
 1,440 samples the readers refuse) restart their segments at each junction, the others go on
 (measured at tile 1 over 400 s of stream)."""
-STEADY_DELAY_S = 2.0
-"""The delay [s] below which the monitor has worked off its start (``_start_and_steady``)."""
+STEADY_DELAY_S = 2.5
+"""The median delay of a set of unit updates [s] below which the monitor has worked off its
+start (``_start_and_steady``): in service it is about 1.5 s (a chunk's update waits for its 1 s
+lookahead), and a start's backlog holds it above 10 s."""
 
 
 def _start_and_steady(updates: Path, inertia_times=(), inertia_delays=()) -> dict:
-    """From ``updates.jsonl``: when the start's backlog was worked off (the first unit update
-    whose delay is under ``STEADY_DELAY_S``, in seconds after the first update), and the delays
-    of the unit updates from then on (median, 99 %, max) and their number; the updates
-    before it are the start's. With the monitor's area lines (their times and delays, in
-    emission order): the delays of those from then on (``steady_inertia_delay_s``)."""
+    """From ``updates.jsonl``: when the start's backlog was worked off (in seconds after the
+    first update: the first set of unit updates, one per stream time, from which the median
+    delay of every set of a tenth of the units or more stays under ``STEADY_DELAY_S``; a later
+    restart's few units, deferred, do not count as the start's), and the delays of the unit updates from then on (median,
+    99 %, max) and their number; the updates before it are the start's. With the monitor's
+    area lines (their times and delays, in emission order): the delays of those from then on
+    (``steady_inertia_delay_s``)."""
     rows = [x for x in map(json.loads, updates.read_text().splitlines()) if "unit" in x and "delay_s" in x]
     if not rows:
         return {}
     t0 = rows[0]["t"]
-    k = next((j for j, x in enumerate(rows) if x["delay_s"] < STEADY_DELAY_S), None)
-    if k is None:
+    sets: dict = {}
+    for x in rows:
+        sets.setdefault(x["t"], []).append(x["delay_s"])
+    times = sorted(sets)
+    most = max(len(v) for v in sets.values())
+    late = [t for t in times if len(sets[t]) >= 0.1 * most and np.median(sets[t]) >= STEADY_DELAY_S]
+    after = [t for t in times if not late or t > late[-1]]
+    if not after:
         return {"backlog_worked_off_after_s": None, "updates_in_start": len(rows)}
-    d = np.array([x["delay_s"] for x in rows[k:]])
-    out = {"backlog_worked_off_after_s": round(rows[k]["t"] - t0, 3), "updates_in_start": k,
-           "steady": {"updates": int(d.size), "stream_s": round(rows[-1]["t"] - rows[k]["t"], 3),
-                      "delay_s": _stats(d)}}
-    area = np.array([dt for t, dt in zip(inertia_times, inertia_delays) if t >= rows[k]["t"]])
+    start = after[0]
+    d = np.array([x["delay_s"] for x in rows if x["t"] >= start])
+    out = {"backlog_worked_off_after_s": round(start - t0, 3), "updates_in_start": len(rows) - int(d.size),
+           "steady": {"updates": int(d.size), "stream_s": round(times[-1] - start, 3), "delay_s": _stats(d)}}
+    area = np.array([dt for t, dt in zip(inertia_times, inertia_delays) if t >= start])
     if area.size:
         out["steady_inertia_delay_s"] = {**_stats(area), "line_sets": int(area.size)}
     return out

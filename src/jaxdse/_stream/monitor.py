@@ -725,15 +725,16 @@ class _Stream:
         return out
 
     def behind(self) -> bool:
-        """Whether a restarted unit's chunks wait for :meth:`catch_up`."""
+        """Whether deferred chunks (a start's, a restarted unit's) wait for :meth:`catch_up`."""
         return any(group.behind() for group, _ in self.groups)
 
     def catch_up(self) -> list[Update]:
-        """One deferred chunk of each unit that has one (the main thread's spare time)."""
-        out = []
+        """One deferred chunk of each unit of the first group that has them (the main thread's
+        spare time; a group at a time, so that a frame waits for one group's call at most)."""
         for group, _ in self.groups:
-            out += group.catch_up()
-        return out
+            if group.behind():
+                return group.catch_up()
+        return []
 
     def _stale(self, v, i, usable):
         """Samples that repeat the unit's previous one exactly in both phasors, where a second of

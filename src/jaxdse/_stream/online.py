@@ -19,11 +19,11 @@ unit, as the file readers do (``jaxdse._io.measurement``):
   and the governor's initial state; the same call gives the blocks of every chunk those samples
   hold (one pass over them, not one call per chunk: at a start, every unit of every stream
   reaches it in the same second), and the chunks after them follow as the frames come;
-* with ``defer`` (the live monitor), a few units (the small batch's) that restart while others
-  of their group already have estimates are background work: their chunks wait for
-  :meth:`OnlineGroup.catch_up`, which the monitor calls when no frame is waiting, so that a
-  restart's chunks do not delay the estimates in service; a unit whose
-  backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again.
+* with ``defer`` (the live monitor), a start (no unit of the group has an estimate yet) and a
+  few units (the small batch's) that restart while others of their group have estimates are
+  background work: their chunks wait for :meth:`OnlineGroup.catch_up`, which the monitor calls
+  when no frame is waiting, so that they delay neither the frames nor the estimates in
+  service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again.
 
 Each chunk's block goes into its unit's ring of the window's blocks, in place; after it, a unit
 whose window is full gets an :class:`Update` (H and D with their 95 % intervals and the verdict
@@ -374,12 +374,14 @@ class OnlineGroup:
     def _chunks(self, defer: bool | None = None) -> list[Update]:
         ready, span = self._ready()
         if (self.defer if defer is None else defer) and ready.any():
-            # a few units in a new segment (the small batch's) while others are in service:
-            # background, up to the lag (a whole-batch restart runs with the frames, once)
+            # background, up to the lag: a few units in a new segment (the small batch's) while
+            # others are in service, and every unit's while none is (a start: every unit of every
+            # stream reaches its first chunk in the same second, and the frames and the system
+            # inertia's lines would wait behind them); a larger restart runs with the frames
             filling = self.filled < self.window.blocks
             behind = self.last_valid - (self.slice_start + span - 1)
             later = ready & filling & (behind < self.lag)
-            if (~filling).any() and later.sum() <= self.small:
+            if filling.all() or later.sum() <= self.small:
                 ready &= ~later
         if not ready.any():
             return []
