@@ -424,10 +424,10 @@ def _start_and_steady(updates: Path, inertia_times=(), inertia_delays=()) -> dic
     """From ``updates.jsonl``: when the start's backlog was worked off (in seconds after the
     first update: the first set of unit updates, one per stream time, from which the median
     delay of every set of a tenth of the units or more stays under ``STEADY_DELAY_S``; a later
-    restart's few units, deferred, do not count as the start's), and the delays of the unit updates from then on (median,
-    99 %, max) and their number; the updates before it are the start's. With the monitor's
-    area lines (their times and delays, in emission order): the delays of those from then on
-    (``steady_inertia_delay_s``)."""
+    restart's few units, deferred, do not count as the start's), and the delays of the unit
+    updates from then on (median, 99 %, max) and their number; the updates before it are the
+    start's. With the monitor's area lines (their times and delays, in emission order): the
+    delays of those from then on (``steady_inertia_delay_s``)."""
     rows = [x for x in map(json.loads, updates.read_text().splitlines()) if "unit" in x and "delay_s" in x]
     if not rows:
         return {}

@@ -222,7 +222,7 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
         for (_, u), (_, w) in zip(a, b):                       # to round-off (another batch)
             assert (u.verdict, u.segment, u.samples) == (w.verdict, w.segment, w.samples)
             assert u.h_s == pytest.approx(w.h_s, rel=1e-12) and u.h_ci95 == pytest.approx(w.h_ci95, rel=1e-12)
-        if n == "a":   # its start was background too (late by at most the lag); in service: at the same frames
+        if n == "a":   # its start was background too (late by at most the lag); in service: same frames
             assert all(0 <= kb - ka <= 50 + 1 for (ka, _), (kb, _) in zip(a, b))
             assert [k for k, _ in a if k >= 1000] == [k for k, _ in b if k >= 1000]
         else:                                                  # restarted: later, by at most the lag

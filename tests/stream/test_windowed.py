@@ -93,12 +93,12 @@ def test_a_segments_first_slice_gives_its_chunks_blocks_in_one_pass(hydro, monke
     assert chunks == 14
 
     def cut(a, b):   # a slice on the stream's own time axis, as the monitor cuts them
-        return jd.Recording(t_s=np.arange(b - a) / 25.0, v_mag_pu=rec.v_mag_pu[a:b], v_ang_rad=rec.v_ang_rad[a:b],
-                            i_mag_pu=rec.i_mag_pu[a:b], i_ang_rad=rec.i_ang_rad[a:b], f_hz=rec.f_hz[a:b],
-                            location=rec.location)
+        return jd.Recording(t_s=np.arange(b - a) / 25.0, v_mag_pu=rec.v_mag_pu[a:b],
+                            v_ang_rad=rec.v_ang_rad[a:b], i_mag_pu=rec.i_mag_pu[a:b],
+                            i_ang_rad=rec.i_ang_rad[a:b], f_hz=rec.f_hz[a:b], location=rec.location)
 
-    run = eqx.filter_jit(lambda r, c, k: window_chunk(r, g.plant, cfg, settings, OLS, c, size, 0 if c else start,
-                                                      chunks=k))
+    run = eqx.filter_jit(lambda r, c, k: window_chunk(r, g.plant, cfg, settings, OLS, c, size,
+                                                      0 if c else start, chunks=k))
     blocks, carry = [], None
     for k in range(chunks):
         b, carry = run(cut(k * size, k * size + span + (0 if carry else start)), carry, 1)
@@ -114,11 +114,13 @@ def test_a_segments_first_slice_gives_its_chunks_blocks_in_one_pass(hydro, monke
     calls = []
     for name in ("_first", "_next"):
         real = getattr(online, name)
-        monkeypatch.setattr(online, name, lambda *a, real=real, name=name: calls.append((name, k)) or real(*a))
+        monkeypatch.setattr(online, name,
+                            lambda *a, real=real, name=name: calls.append((name, k)) or real(*a))
     grp = OnlineGroup([g.name], [g.plant], [rec.location], 25.0, window, identify_settings=OLS)
     for k in range(span + start + 3 * size):
-        grp.push(k, [rec.v_mag_pu[k]], [rec.v_ang_rad[k]], [rec.i_mag_pu[k]], [rec.i_ang_rad[k]], [rec.f_hz[k]],
-                 [True])
+        grp.push(k, [rec.v_mag_pu[k]], [rec.v_ang_rad[k]], [rec.i_mag_pu[k]], [rec.i_ang_rad[k]],
+                 [rec.f_hz[k]], [True])
     # the first slice's call, then one call per chunk as its samples come (chunk 14 ends 25
     # samples after the first slice)
-    assert calls == [("_first", span + start - 1)] + [("_next", (chunks + j) * size + span - 1) for j in (0, 1, 2)]
+    nexts = [("_next", (chunks + j) * size + span - 1) for j in (0, 1, 2)]
+    assert calls == [("_first", span + start - 1)] + nexts

@@ -209,7 +209,8 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
         state = (jnp.stack([x2_0, 0.0]), x2_0, gov0, dw_start[lead], None, None, jnp.zeros((), jnp.int32))
     else:
         t_ref, t_m0 = carry.t_ref, carry.t_m0
-        state = (carry.smooth, carry.x2, carry.governor, carry.dw, carry.filters, carry.signals, carry.elapsed)
+        state = (carry.smooth, carry.x2, carry.governor, carry.dw, carry.filters, carry.signals,
+                 carry.elapsed)
 
     def heun(x, d):   # governor_torque's step, from a carried state
         x = _heun(gov, dt, t_ref)(x, d)
@@ -247,7 +248,8 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
         w = ((elapsed + jnp.arange(size)) * dt >= s.settle_s).astype(u.dtype)
         block = Blocks(normal=jnp.einsum("ftp,ftq,t->fpq", designs, designs, w),
                        rhs=jnp.einsum("ftp,ft,t->fp", designs, zs, w),
-                       zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w), count=jnp.sum(w))
+                       zz=jnp.einsum("ft,ft,t->f", zs, zs, w), z=jnp.einsum("ft,t->f", zs, w),
+                       count=jnp.sum(w))
         gov_last = jax.tree_util.tree_map(lambda x: x[-1], gov_states)
         return (smooth[size - 1], x2[-1], gov_last, dw[-1], last, u[:, -1], elapsed + size), block
 

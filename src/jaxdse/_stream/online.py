@@ -108,8 +108,9 @@ def _per_unit(chunk, recs, *batched):
 @eqx.filter_jit
 def _first(recs, plants, q_disc, config, settings, ident, size, start, chunks):
     """A segment's first slice: the blocks of its first ``chunks`` chunks ([U, chunks, ...]) in one pass."""
-    return _per_unit(lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q, chunks),
-                     recs, plants, q_disc)
+    return _per_unit(
+        lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q, chunks),
+        recs, plants, q_disc)
 
 
 @eqx.filter_jit
@@ -135,8 +136,8 @@ def _push(ring, pos, blocks, ready):
     """Each ready unit's block into its ring at ``pos`` [U] (``filled % blocks``), in place: the
     rings are donated (a copy of a thousand units' rings cost a chunk tens of milliseconds)."""
     units = jnp.arange(pos.shape[0])
-    return jax.tree_util.tree_map(lambda r, b: r.at[units, pos].set(jnp.where(_leading(ready, b), b, r[units, pos])),
-                                  ring, blocks)
+    return jax.tree_util.tree_map(
+        lambda r, b: r.at[units, pos].set(jnp.where(_leading(ready, b), b, r[units, pos])), ring, blocks)
 
 
 @functools.partial(jax.jit, donate_argnums=0)
@@ -294,8 +295,8 @@ class OnlineGroup:
                              f_hz=one * f_nom if self.with_frequency else None, location=self.location)
 
         def programs(n, plants, q_disc):
-            first, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config, self.settings,
-                                    self.ident, self.size, self.start, self.first_chunks)
+            first, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config,
+                                    self.settings, self.ident, self.size, self.start, self.first_chunks)
             blocks, carries = _next(flat(self.span, n), plants, q_disc, carries, self.config, self.settings,
                                     self.ident, self.size)
             ring = _empty_ring(blocks, self.window.blocks)
@@ -303,8 +304,8 @@ class OnlineGroup:
                 _where(jnp.ones(n, bool), carries, carries)
             ring = _push_first(ring, first, jnp.ones(n, bool))
             ring = _push(ring, jnp.zeros(n, np.int32), blocks, jnp.ones(n, bool))
-            jax.block_until_ready(_estimates(ring, jnp.zeros(n, np.int32), carries, plants, self.ident, self.window,
-                                             self.verdict_settings))
+            jax.block_until_ready(_estimates(ring, jnp.zeros(n, np.int32), carries, plants, self.ident,
+                                             self.window, self.verdict_settings))
             return carries, ring
 
         carries, ring = programs(self.u, self.plants, self.q_disc)
@@ -390,8 +391,8 @@ class OnlineGroup:
         out = self._run(ready & ~self.started, t_end) + self._run(ready & self.started, t_end)
         first = ready & ~self.started
         self.started |= ready
-        self.slice_start = np.where(ready, self.slice_start + np.where(first, self.first_chunks, 1) * self.size,
-                                    self.slice_start)
+        step = np.where(first, self.first_chunks, 1) * self.size
+        self.slice_start = np.where(ready, self.slice_start + step, self.slice_start)
         return [u for _, u in sorted(out, key=lambda x: x[0])]
 
     def _run(self, ready, t_end) -> list[tuple[int, Update]]:
@@ -423,12 +424,15 @@ class OnlineGroup:
                 self.ring = _push_first(self.ring, blocks, jnp.asarray(ready))
             else:
                 self.ring = _push(self.ring, jnp.asarray(self.filled % n), blocks, jnp.asarray(ready))
-            self.filled = np.where(ready, self.first_chunks if first else self.filled + 1, self.filled).astype(np.int32)
+            self.filled = np.where(ready, self.first_chunks if first else self.filled + 1,
+                                   self.filled).astype(np.int32)
             ring, filled, carries, pos = self.ring, self.filled, self.carries, units
         else:     # every row is ready (a row given twice: the same values)
             ring, ones = _take(self.ring, rows), jnp.ones(rows.size, bool)
-            ring = _push_first(ring, blocks, ones) if first else _push(ring, jnp.asarray(self.filled[rows] % n),
-                                                                       blocks, ones)
+            if first:
+                ring = _push_first(ring, blocks, ones)
+            else:
+                ring = _push(ring, jnp.asarray(self.filled[rows] % n), blocks, ones)
             self.filled[rows] = self.first_chunks if first else self.filled[rows] + 1
             filled = self.filled[rows]
             self.carries, self.ring = _put((self.carries, self.ring), rows, (carries, ring))
