@@ -17,8 +17,9 @@ unit, as the file readers do (``jaxdse._io.measurement``):
 * a segment's first chunk waits for the segment's first ``qss_window_s`` (at most
   ``window_s``: :meth:`~jaxdse._core.windowed.WindowSettings.start_samples`), which give T_ref
   and the governor's initial state; the same call gives the blocks of every chunk those samples
-  hold (one pass over them, not one call per chunk: at a start, every unit of every stream
-  reaches it in the same second), and the chunks after them follow as the frames come;
+  hold (one front end and a loop over the chunks, not a call per chunk: at a start, every unit
+  of every stream reaches it in the same second), and the chunks after them follow as the frames
+  come;
 * with ``defer`` (the live monitor), a start (no unit of the group has an estimate yet) and a
   few units (the small batch's) that restart while others of their group have estimates are
   background work: their chunks wait for :meth:`OnlineGroup.catch_up`, which the monitor calls
@@ -107,7 +108,7 @@ def _per_unit(chunk, recs, *batched):
 
 @eqx.filter_jit
 def _first(recs, plants, q_disc, config, settings, ident, size, start, chunks):
-    """A segment's first slice: the blocks of its first ``chunks`` chunks ([U, chunks, ...]) in one pass."""
+    """A segment's first slice: the blocks of its first ``chunks`` chunks ([U, chunks, ...]) in one call."""
     return _per_unit(
         lambda r, p, q: window_chunk(r, p, config, settings, ident, None, size, start, q, chunks),
         recs, plants, q_disc)
