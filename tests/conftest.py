@@ -213,6 +213,7 @@ on the 60 s recording (1536 samples) and on two split parts (2 x 1280), and ``as
 
 
 LONGEST_FIRST = ("pipeline", "tests/many/test_tune.py", "tests/app/test_dyr_playback.py",
+                 "tests/app/test_regfm_fleet.py",  # (added 2026-11-30: 151 s in the suite, two fits)
                  "tests/models/test_regcv1.py",  # (added 2026-11-29: 56 s alone, 31 s CPU)
                  "tests/stream/test_monitor.py", "demo", "tests/models/test_machines_new.py",
                  "tests/core/test_estimate.py", "tests/stream/test_windowed.py",

@@ -146,6 +146,8 @@ from ._models.governors import WeightedGovernor as WeightedGovernor
 from ._models.ibr import IBR_FIELDS as IBR_FIELDS
 from ._models.ibr import IBR_MODELS as IBR_MODELS
 from ._models.ibr import REGCV1 as REGCV1
+from ._models.ibr import REGFM_A1 as REGFM_A1
+from ._models.ibr import REGFM_B1 as REGFM_B1
 from ._models.ibr import gfm_from_andes as gfm_from_andes
 from ._models.ibr import REECA1 as REECA1
 from ._models.ibr import REECB1 as REECB1

@@ -77,7 +77,7 @@ def test_fleet_identifies_the_virtual_inertia(tmp_path, factor):
     assert main(["check", str(path), "--out", str(tmp_path / "check")]) == 0
     checked = json.loads((tmp_path / "check" / "check.json").read_text())
     (u,) = checked["units"]
-    assert u["outcome"] == "pass" and "grid-forming converter" in " ".join(u["notes"]), u
+    assert u["outcome"] == "pass" and "virtual synchronous generator" in " ".join(u["notes"]), u
     assert main(["fleet", str(path), "--out", str(tmp_path / "out")]) == 0
     (e,) = json.loads((tmp_path / "out" / "fleet.json").read_text())["units"]
     h_true = META["H_s"]

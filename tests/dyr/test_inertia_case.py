@@ -58,3 +58,18 @@ def test_case_units_by_kind(case, tmp_path):
     rows, _ = area_inertia(inertia_units(units, [], {}, {}, read_unit_states(tmp_path / "s.csv"), 10.0),
                            InertiaSettings(), ["area 1", "area 2"])
     assert rows[-1].E_MWs == pytest.approx(2600.0 + 300.0) and rows[-1].units_online == 9
+
+
+def test_a_grid_forming_record_counts_at_its_virtual_h(case, tmp_path):
+    """A REGFMA1 record (droop: H = TPf / (2 mp)) and a REGCV1 record (H = M/2) are grid-forming
+    units at their records' virtual H, without naming them in [inertia] grid_forming."""
+    raw, _ = case
+    dyr = (DATA / "ieee14.dyr").read_text() + (
+        "3 'REGFMA1' 2 1 0 0.03 0.02 0.02 2.0 1.3 0.0 1.0 0.0 1.0 -1.0 0.01 0.05 0.01 0.1 3.0 20.0 "
+        "0.0 6.0 /\n"
+        "3 'REGCV1' 4 0.01 0 0 6 1 0 0.2 0.5 0.02 0.5 0.02 0.2 0.01 0.2 0.01 /\n")
+    (tmp_path / "g.dyr").write_text(dyr)
+    units, _ = case_units(raw, read_dyr(tmp_path / "g.dyr", strict=False), InertiaConfig())
+    by = {u.name: u for u in units}
+    assert (by["3_2"].kind, by["3_2"].h_model_s) == ("grid_forming", pytest.approx(0.03 / (2 * 0.01)))
+    assert (by["3_4"].kind, by["3_4"].h_model_s) == ("grid_forming", pytest.approx(3.0))

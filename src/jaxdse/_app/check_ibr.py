@@ -43,7 +43,7 @@ from .._dyr.records import PSSE_IBR_MODELS, ibr_model
 from .._dyr.stiff import modes
 from .._dyr.unit import UnitInputs
 from .._io.psse import DyrData, RawCase, RawGenerator, record_label
-from .._models.ibr import IBR_MODELS, IBR_ROLES
+from .._models.ibr import IBR_MODELS, IBR_ROLES, REGFM_A1, REGFM_B1
 
 IBR_KINDS = ("converter", "electrical", "plant")
 """The roles of a plant's records in the columns of the reports."""
@@ -96,8 +96,11 @@ def ibr_static(raw: RawCase, dyr: DyrData, g: RawGenerator, horizon_s: float = 2
     bus = raw.buses.get(g.bus)
     if bus is None or bus.problem or not (math.isfinite(bus.vm_pu) and bus.vm_pu > 0):
         problems.append(("bus", f"bus {g.bus} of the generator: no usable voltage VM"))
-    elif isinstance(um.unit, IbrUnit) and not problems:   # (a grid-forming converter has no such limits)
+    elif isinstance(um.unit, IbrUnit) and not problems:
         problems += _crossings(um.unit, records, g, bus.vm_pu, horizon_s)
+    elif (isinstance(um.unit, GfmUnit) and not problems
+          and isinstance(um.unit.converter, (REGFM_A1, REGFM_B1))):
+        problems += _gfm_crossings(um.unit.converter, records["converter"], g, bus)
     return IbrStatic(models, records, unsupported, problems, um, [])
 
 
@@ -154,6 +157,42 @@ def _crossings(unit: IbrUnit, records: dict, g: RawGenerator, vt: float, horizon
     return out
 
 
+def _gfm_crossings(conv: REGFM_A1 | REGFM_B1, rec, g: RawGenerator, bus) -> list:
+    """The limits of a REGFM_A1 or REGFM_B1 record that its power flow crosses at the start.
+    REGFM_A1: P, Q within the overload controllers' Pmin..Pmax, Qmin..Qmax; |I0| within Imax; the
+    internal voltage E0 behind ZSORCE within Emin..Emax. REGFM_B1: |I0| within ImaxSS (and its
+    priority axis within kf ImaxSS); the angle of E0 from V within dmax = asin(XL ImaxSS); P0 >= 0
+    without ESFlag."""
+    p0, q0 = g.pg_mw / g.mbase_mva, g.qg_mvar / g.mbase_mva
+    v = bus.vm_pu * complex(math.cos(math.radians(bus.va_deg)), math.sin(math.radians(bus.va_deg)))
+    i0 = ((p0 + 1j * q0) / v).conjugate()
+    e0 = abs(v + complex(float(conv.re_pu), float(conv.xe_pu)) * i0)
+    where = (f"PG = {g.pg_mw:g} MW, QG = {g.qg_mvar:g} Mvar on MBASE = {g.mbase_mva:g} MVA, "
+             f"VT = {bus.vm_pu:.4g} pu")
+    if isinstance(conv, REGFM_B1):
+        i_ss, xl = float(conv.i_max_ss_pu), float(conv.xe_pu)
+        e = v + complex(float(conv.re_pu), xl) * i0
+        angle = math.atan2((e / v).imag, (e / v).real)
+        i_pll = i0 * v.conjugate() / abs(v)          # Id - j Iq in the voltage's frame
+        prio, axis = (i_pll.real, "Id0") if int(conv.pqflag) else (-i_pll.imag, "Iq0")
+        checks = [("|I0|", abs(i0), "ImaxSS", i_ss, "above"),
+                  (axis, abs(prio), "kf ImaxSS", float(conv.kf) * i_ss, "above"),
+                  ("dIT0", angle, "dmax = asin(XL ImaxSS)", math.asin(min(xl * i_ss, 1.0)), "above")]
+        if not int(conv.esflag):
+            checks.append(("P0", p0, "0 (ESFlag = 0: a generator)", 0.0, "below"))
+    else:
+        checks = [(s, x, con, float(getattr(conv, f)), side) for s, x, con, f, side in (
+            ("P0", p0, "Pmax", "p_max_pu", "above"), ("P0", p0, "Pmin", "p_min_pu", "below"),
+            ("Q0", q0, "Qmax", "q_max_pu", "above"), ("Q0", q0, "Qmin", "q_min_pu", "below"),
+            ("E0", e0, "Emax", "e_max_pu", "above"), ("E0", e0, "Emin", "e_min_pu", "below"))]
+        if float(conv.i_max_pu) > 0:
+            checks.append(("|I0|", abs(i0), "Imax", float(conv.i_max_pu), "above"))
+    return [(rec.model, f"{record_label(rec)}: {signal} = {value:.4g} pu {side} {con} = {bound:.4g} "
+                        f"({where}): the record's own limit does not let the plant hold its power flow")
+            for signal, value, con, bound, side in checks
+            if (side == "above" and value > bound + 1e-9) or (side == "below" and value < bound - 1e-9)]
+
+
 class IbrLane(NamedTuple):
     """One run of one plant: the power flow at its terminal, the voltage step (fraction of |V|)
     and the frequency step [pu of nominal]."""
@@ -206,7 +245,10 @@ def _one(unit: IbrUnit, lane: IbrLane, run) -> IbrResult:
         k = 1.0 + jnp.where(on, lane.v_step, 0.0)
         dv = jnp.where(on, lane.v_step * v0, 0.0)
         u = UnitInputs(lane.v_re * k, lane.v_im * k, jnp.where(on, lane.f_step, 0.0), zero)
-        if isinstance(unit, GfmUnit):
+        if isinstance(unit, GfmUnit):   # its own rotor makes its frequency: the step turns the phasor
+            turn = unit.omega_s_rad_s * jnp.where(on, lane.f_step * (t - run.step_at_s), 0.0)
+            c, s = jnp.cos(turn), jnp.sin(turn)
+            u = u._replace(v_re_pu=u.v_re_pu * c - u.v_im_pu * s, v_im_pu=u.v_re_pu * s + u.v_im_pu * c)
             return u, refs._replace(v_ref_pu=refs.v_ref_pu + dv)
         e = refs.electrical._replace(v_ref0_pu=refs.electrical.v_ref0_pu + dv,
                                      v_ref1_pu=refs.electrical.v_ref1_pu + dv)
@@ -265,7 +307,8 @@ OPEN_LOOP_NOTE = ("REECA1/REECB1/REECCU1 QFLAG = 1 with VFLAG = 1: its Q loop se
                   "open (two integrators in series, undamped), so the voltage step is run but not judged")
 
 
-GFM_NOTE = ("a grid-forming converter (REGCV1, REGCV2) sets its angle and voltage through the network: "
+GFM_NOTE = ("a virtual synchronous generator (REGCV1, REGCV2) sets its angle and voltage through the "
+            "network: "
             "with its terminal voltage imposed its virtual rotor has no synchronising power (two modes at "
             "0 at rest), so the voltage and frequency steps are run but not judged (the held run is)")
 
@@ -301,7 +344,7 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
         return "fail", fails, numbers, []
     elec = getattr(unit, "electrical", None)   # (none in a grid-forming converter)
     open_loop = elec is not None and bool(elec.qflag) and bool(elec.vflag)
-    gfm = isinstance(unit, GfmUnit)
+    gfm = isinstance(unit, GfmUnit) and not unit.converter.judged_with_voltage_imposed
     notes = [OPEN_LOOP_NOTE] if open_loop else [GFM_NOTE] if gfm else []
     t = np.arange(len(held["p"])) / spec.frame_hz
     after = t > spec.step_at_s
@@ -326,7 +369,10 @@ def judge(st: IbrStatic, g: RawGenerator, held: dict, steps: tuple[dict, dict], 
             if spread > band:
                 moves.append(f"{name} moves by {spread:.3g} pu over the last {spec.settle_window_s:g} s "
                              f"(band {band:.3g} pu)")
-        dy_end = np.where(unit.at_rest, np.abs(r["dy_end"]), 0.0)
+        d_end = np.array(r["dy_end"], float)
+        if key == "fstep" and isinstance(unit, GfmUnit):   # its angle turns with the imposed phasor
+            d_end[unit.converter.angle_state] -= 2 * math.pi * F_STEP_HZ
+        dy_end = np.where(unit.at_rest, np.abs(d_end), 0.0)
         numbers[f"{key}_max_dxdt_end"] = float(np.max(dy_end)) if dy_end.size else 0.0
         if numbers[f"{key}_max_dxdt_end"] > spec.settle_derivative:
             k = int(np.argmax(dy_end))

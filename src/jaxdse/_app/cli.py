@@ -177,7 +177,12 @@ record is an inverter-based plant: no rotor, so no H
 or D ("not applicable"); with model = "dyr" its records are played back and P against
 frequency, Q against voltage judged by the same windows (MOD-026-2). A grid-forming converter
 (an ANDES REGCV1 or REGCV2 record: `bus 'REGCV1' id Tc kw kv M D ra xs Kpvd Kivd Kpvq Kivq KpId
-KiId KpIq KiIq /`) has a virtual rotor: with model = "dyr" its H = M/2 and D are fitted to the
+KiId KpIq KiIq /`; a WECC REGFM_A1 or REGFM_B1 in PSS/E's order, `bus 'REGFMA1' id VFlag QVFlag
+TPf TQf TVf Imax Emax Emin Pmax Pmin Qmax Qmin mp mq kppmax kipmax kpqmax kiqmax kpv kiv /` or
+`bus 'REGFMB1U' id wFlag VdrpFlag QVFlag PQFlag FFlag ESFlag mq kpv kiv mp Dwmax Dwmin kpPLL kiPLL
+DwPLLmax DwPLLmin Tp H D1 D2 wD ImaxSS kf kI ImaxF TPf TQf TVf TIf Ke VPLLfrz /`, the coupling
+impedance the generator's ZSORCE) has a virtual rotor: with model = "dyr" its H and D (REGCV1:
+M/2 and D; REGFM_A1: TPf/(2 mp) and 1/mp; REGFM_B1: H and 1/mp + D1) are fitted to the
 recording by its playback, with an interval and a verdict.
 
 {FLEET_MODELS}
@@ -468,10 +473,14 @@ VMAX/VMIN (VFLAG = 0) or REECCU1's SOC limits, at the start or within the runs (
 of charge integrates P and is left out of the at-rest test).
 A step still settling at 21 s with every mode decaying is a note (its time constant), and so is
 the voltage step of QFLAG = 1 with VFLAG = 1 (its voltage loop closes only through the
-network: open with the voltage imposed). A grid-forming converter (REGCV1, REGCV2) gets the
-held run judged and its steps run unjudged (with its voltage imposed its virtual rotor has no
-synchronising power). Other converter models (WT4G1, PVGU1, REECDU1, ...)
-are units, not supported, named.
+network: open with the voltage imposed). ANDES's virtual synchronous generators (REGCV1, REGCV2)
+get the held run judged and their steps run unjudged (with the voltage imposed their virtual
+rotor has no synchronising power); the WECC grid-forming REGFM_A1 (REGFMA1) and REGFM_B1
+(REGFMB1U), sources behind ZSORCE that synchronise against the imposed voltage, have all three
+judged, the frequency step turning the imposed phasor, and a data problem where the power flow
+crosses REGFM_A1's Pmax/Pmin, Qmax/Qmin, Imax or Emax/Emin, or REGFM_B1's ImaxSS, kf ImaxSS or
+angle limit asin(XL ImaxSS) (P0 < 0 without ESFlag). Other converter models (WT4G1, PVGU1,
+REECDU1, ...) are units, not supported, named.
 
 Every generator record of the .raw is accounted for (the counts add up to the .raw's): the
 units checked (machines and inverter-based plants; an unknown machine model, e.g. a renamed GENSAL, is a unit, not supported,

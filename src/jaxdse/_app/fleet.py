@@ -112,7 +112,7 @@ def run_fleet(fleet: Fleet, out_dir: Path, stream=None) -> dict:
             entry = ibr_entry(p, a, tr, quality, fleet.criteria, dyr)
             if is_grid_forming(dyr):
                 progress.note(f"jaxdse: {p.name}: a grid-forming converter: fitting its virtual "
-                              "inertia M = 2H and damping D to the recording")
+                              "inertia and damping to the recording")
                 entry.update(gfm_entry(virtual_inertia(a, dyr, fleet.playback.settings, fleet.calibrate)))
             elif (several := unfitted(dyr)) is not None:
                 entry.update(several)
@@ -370,12 +370,12 @@ def gfm_entry(v: dict) -> dict:
         else "not identified"
     return {
         "plant_type": "grid-forming",
-        "estimator": ("virtual rotor: H = M/2 and D of the converter's own record fitted to the "
-                      "recording by its playback (the swing-equation estimator is not run on it)"),
+        "estimator": ((v["meaning"] or "virtual rotor: H = M/2 and D of the converter's own record fitted to "
+                       "the recording by its playback") + " (the swing-equation estimator is not run on it)"),
         "H_s": v["H_s"], "H_ci95": v["H_ci95"], "H_reference_s": v["H_record_s"],
         "H_error_percent": 100 * (v["H_s"] / v["H_record_s"] - 1),
         "D": v["D"], "D_ci95": v["D_ci95"], "D_record": v["D_record"],
-        "D_verdict": d_word, "damping": {"verdict": d_word, "reasons": [GFM_D_MEANING]},
+        "D_verdict": d_word, "damping": {"verdict": d_word, "reasons": [v["meaning"] or GFM_D_MEANING]},
         "verdict": v["verdict"], "reasons": v["reasons"],
         "interval": {"relative_ci_percent": half, "noise_percent": None, "filter_spread_percent": None,
                      "filter_refits_counted": None, "condition": None},

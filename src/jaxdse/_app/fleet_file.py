@@ -178,7 +178,7 @@ def load_fleet(path) -> Fleet:
         why = units.skip_reason()
         ibr = ibr_members(raw, dyr, bus, ids) if not units.units and not units.problems else []
         if ibr:   # an inverter-based plant: its own records only (no rotor)
-            missing = [line for m in ibr for line in ibr_model(dyr, bus, m.id).missing
+            missing = [line for m in ibr for line in ibr_model(dyr, bus, m.id, raw).missing
                        if "is not simulated" not in line]   # a model not simulated: the plant, not judged
             why = (None if not missing else "an inverter-based plant whose records cannot be played "
                    f"back ({missing[0]}) and which has no rotor to estimate")

@@ -664,14 +664,18 @@ def _virtual_inertia(e: dict) -> str:
     """A grid-forming converter's virtual H and D (fleet.json's ``virtual_inertia``) in words."""
     v = e["virtual_inertia"]
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in e["reasons"].values())
+    fitted = ", ".join(v.get("fitted") or ("M", "D"))
+    fit = v.get("fitted") or {}
+    h_label = ("equivalent inertia H = TPf/(2 mp) [s]" if "TPf" in fit
+               else "virtual inertia H [s]" if "H" in fit else "virtual inertia H = M/2 [s]")
     return f"""<p>{html.escape(e['estimator'])}.</p>
-<table><tr><td>virtual inertia H = M/2 [s]</td><td>{_f(v['H_s'], '.3f')}</td></tr>
+<table><tr><td>{h_label}</td><td>{_f(v['H_s'], '.3f')}</td></tr>
 <tr><td>95 % interval [s]</td><td>{_f(v['H_ci95'][0], '.3f')} – {_f(v['H_ci95'][1], '.3f')}
  (±{_f(v['relative_ci_percent'], '.1f')} %)</td></tr>
 <tr><td>H in the record [s]</td><td>{_f(v['H_record_s'], '.3f')}</td></tr>
 <tr><td>damping D [pu power / pu speed]</td><td>{_f(v['D'], '.3f')} ({_f(v['D_ci95'][0], '.3f')} –
  {_f(v['D_ci95'][1], '.3f')}); in the record {_f(v['D_record'], '.3f')}</td></tr>
-<tr><td>playback RMS error [% MBASE], the record's M, D → fitted</td><td>
+<tr><td>playback RMS error [% MBASE], the record's {fitted} → fitted</td><td>
  P {_f(100 * v['rms_before_pu'][0], '.3g')} → {_f(100 * v['rms_after_pu'][0], '.3g')},
  Q {_f(100 * v['rms_before_pu'][1], '.3g')} → {_f(100 * v['rms_after_pu'][1], '.3g')}</td></tr>
 </table>{f'<ul>{reasons}</ul>' if reasons else ''}

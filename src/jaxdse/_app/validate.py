@@ -82,13 +82,18 @@ DEFAULT_PARAMETERS = {
     "REPCA1": (("kp", "Kp"), ("ki", "Ki"), ("ddn_pu", "Ddn"), ("dup_pu", "Dup")),
     "REGCV1": (("m_s", "M"), ("d_pu", "D")),
     "REGCV2": (("m_s", "M"), ("d_pu", "D")),
+    "REGFM_A1": (("mp", "mp"), ("mq", "mq")),
+    "REGFMA1": (("mp", "mp"), ("mq", "mq")),
+    "REGFM_B1": (("h_s", "H"), ("mp", "mp"), ("mq", "mq")),
+    "REGFMB1U": (("h_s", "H"), ("mp", "mp"), ("mq", "mq")),
 }
 """The default parameter set per model: H and D, the exciter's main gain and time constant, the
 governor's droop (IEEEG1: its gain K = 1/R) and main time constant; of an inverter-based plant
 the gains an engineer tunes on site (its time constants are mostly below a frame period): the
 electrical controls' voltage-dip reactive gain Kqv, the plant controller's voltage-loop PI gains
 Kp, Ki and its frequency droops Ddn (over-frequency) and Dup (under-frequency); of a grid-forming
-converter (REGCV1, REGCV2) its virtual inertia M = 2H and damping D."""
+converter its virtual inertia M = 2H and damping D (REGCV1, REGCV2) or its P-f and Q-V droops mp, mq
+(REGFM_A1), its H and droops (REGFM_B1)."""
 IBR_PARTS = ("electrical", "plant")
 """The parts of an inverter-based plant (:class:`~jaxdse._dyr.ibr_unit.IbrUnit`) calibrated."""
 GFM_PARTS = ("converter",)
@@ -380,7 +385,7 @@ def calibrated_dyr(fleet: Fleet, changed) -> str:
                     if r.model in IBR_ROLES}
         fit = decision.fit
         specs = {s.label: s for s in fit.specs}
-        for part in (IBR_PARTS if p.ibr else MACHINE_PARTS):
+        for part in (GFM_PARTS + IBR_PARTS if p.ibr else MACHINE_PARTS):
             mine = [(specs[lab], float(v)) for lab, v in zip(fit.labels, fit.values)
                     if lab in decision.changed and specs[lab].part == part]
             if not mine or part not in recs:

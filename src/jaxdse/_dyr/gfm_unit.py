@@ -1,4 +1,5 @@
-"""A grid-forming converter (ANDES REGCV1/REGCV2: a virtual synchronous generator) as a unit,
+"""A grid-forming converter (ANDES REGCV1/REGCV2: a virtual synchronous generator; WECC REGFM_A1:
+droop-controlled; WECC REGFM_B1: a virtual synchronous machine) as a unit,
 driven as a machine's :class:`~jaxdse._dyr.unit.DyrUnit` and an inverter-based plant's
 :class:`~jaxdse._dyr.ibr_unit.IbrUnit` are: the terminal voltage phasor imposed
 (:class:`~jaxdse._dyr.unit.UnitInputs`; the frequency is not an input, the virtual rotor makes
@@ -17,14 +18,14 @@ import numpy as np
 from .._core.machine import Machine
 from .._core.plant import Plant
 from .._models.governors import TGOV1
-from .._models.ibr import REGCV1, GfmReferences, GfmSignals
+from .._models.ibr import REGCV1, REGFM_A1, REGFM_B1, GfmReferences, GfmSignals
 from .unit import UnitInputs
 
 
 class GfmUnit(eqx.Module):
     """One grid-forming converter (machine base = the converter's Sn)."""
 
-    converter: REGCV1
+    converter: REGCV1 | REGFM_A1 | REGFM_B1
 
     PARTS = ("converter",)
     """The unit's one part (as :class:`~jaxdse._dyr.ibr_unit.IbrUnit` names its parts)."""

@@ -3,7 +3,9 @@
 is (:func:`~.inventory.inventory`'s categories):
 
 * a synchronous unit (a machine record): H of the record, on MBASE;
-* a converter-interfaced source (REGCA1, WT4G1, PVGU1, ...): grid-following, no inertia,
+* a grid-forming converter record (REGCV1, REGCV2, REGFM_A1, REGFM_B1): its virtual H from the
+  record (M/2; the droop's equivalent TPf / (2 mp); REGFM_B1's H), or as ``[inertia] grid_forming`` names it;
+* another converter-interfaced source (REGCA1, WT4G1, PVGU1, ...): grid-following, no inertia,
   unless ``[inertia] grid_forming`` names it with its virtual H;
 * an online unit without a machine record jaxdse reads (no dynamic records, an unknown machine
   model, a machine's controls without the machine): counted with H unknown (0, and said);
@@ -20,8 +22,9 @@ import math
 from .._core.inertia import InertiaUnit
 from .._io.inertia import InertiaConfig, unit_name
 from .._io.psse import DyrData, RawCase
+from .._models.ibr import ibr_from_dyr
 from .inventory import inventory, is_converter
-from .records import record_kind
+from .records import GFM_MODELS, record_kind
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,8 +78,16 @@ def case_units(raw: RawCase, dyr: DyrData, cfg: InertiaConfig) -> tuple[list[Cas
                          f"{raw.sbase_mva:g} MVA is used")
         machines = [r for r in a.records if record_kind(r) == "machine"]
         h = None
+        gfm = [r for r in a.records if r.model in GFM_MODELS]
         if name in cfg.grid_forming:
             kind, h = "grid_forming", cfg.grid_forming[name]
+        elif gfm:   # its record's virtual H (REGCV1: M/2; REGFM_A1: TPf / (2 mp); REGFM_B1: H)
+            kind = "grid_forming"
+            try:
+                h = float(ibr_from_dyr(gfm[0].model, gfm[0].constants).h_s)
+            except ValueError as err:
+                notes.append(f"{name}: its {gfm[0].model} record (line {gfm[0].line}) does not read "
+                             f"({str(err).splitlines()[0]}); counted at 0")
         elif machines:
             kind = "synchronous"
             value = machines[0].params.get("H")

@@ -24,7 +24,14 @@ from .._io.psse import (
     record_label,
 )
 from .._models.exciters import EXCITERS, exciter_from_dyr
-from .._models.ibr import IBR_MODELS, IBR_ROLES, ibr_from_dyr, record_readings, vdl_trailing_zeros
+from .._models.ibr import (
+    GFM_FILTER_FLOOR_S,
+    IBR_MODELS,
+    IBR_ROLES,
+    ibr_from_dyr,
+    record_readings,
+    vdl_trailing_zeros,
+)
 from .._models.machines import MACHINES, machine_from_dyr
 from .._models.stabilisers import STABILISERS, stabiliser_from_dyr
 from .gfm_unit import GfmUnit
@@ -51,15 +58,19 @@ PSSE_STABILISER_MODELS = frozenset({
 """Stabiliser models of the PSS/E model library (simulated or not)."""
 PSSE_IBR_MODELS: dict[str, str] = {
     "REGCA1": "converter", "REGCB1": "converter", "REGCC1": "converter", "REGFM_A1": "converter",
-    "REGFM_B1": "converter", "REGCV1": "converter", "REGCV2": "converter",
+    "REGFM_B1": "converter", "REGFMA1": "converter", "REGFMB1U": "converter", "REGCV1": "converter",
+    "REGCV2": "converter",
     "REECA1": "electrical", "REECB1": "electrical", "REECCU1": "electrical", "REECDU1": "electrical",
     "REPCA1": "plant", "REPCB1": "plant", "WTDTA1": "wind", "WTARA1": "wind", "WTPTA1": "wind",
     "WTTQA1": "wind"}
 """Inverter-based resource models (WECC second generation, grid-forming, type-3 wind; simulated
 or not) and their role in a plant."""
-GFM_MODELS = frozenset({"REGCV1", "REGCV2"})
-"""The grid-forming converters simulated (ANDES's virtual synchronous generators): a
-:class:`GfmUnit` each, with a virtual inertia H = M/2."""
+GFM_MODELS = frozenset({"REGCV1", "REGCV2", "REGFM_A1", "REGFMA1", "REGFM_B1", "REGFMB1U"})
+"""The grid-forming converters simulated (ANDES's virtual synchronous generators, with a virtual
+inertia H = M/2; the WECC droop-controlled REGFM_A1, whose equivalent H is TPf / (2 mp); the WECC
+virtual synchronous machine REGFM_B1, H a constant of its record): a
+:class:`GfmUnit` each."""
+
 
 
 @dataclass
@@ -154,6 +165,25 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
             if float(conv.t_e_s) > 0 and math.hypot(g.zr_pu, g.zx_pu) <= 1e-9:
                 out.notes.append(f"REGCB1: Te = {float(conv.t_e_s):g} s with ZSORCE = 0: a current source "
                                  "(Te not used)")
+    if not out.missing and out.models["converter"] in ("REGFM_A1", "REGFMA1", "REGFM_B1", "REGFMB1U"):
+        mid = str(machine_id).strip().upper()
+        g = None if raw is None else next(
+            (x for x in raw.generators if x.bus == int(bus) and x.id.strip().upper() == mid), None)
+        name = out.models["converter"]
+        if g is None:
+            out.missing.append(f"generator {bus} {machine_id!r}: {name} is a voltage source behind the "
+                               "generator's ZSORCE, and there is no .raw generator record to read it from")
+        elif not g.zx_pu > 0:
+            out.missing.append(f"generator {bus} {machine_id!r}: {name} needs a coupling reactance (the "
+                               f"generator's ZSORCE X > 0 on MBASE), got ZX = {g.zx_pu:g}")
+        else:
+            parts["converter"] = eqx.tree_at(lambda c: (c.re_pu, c.xe_pu), parts["converter"],
+                                             (jnp.asarray(float(g.zr_pu)), jnp.asarray(float(g.zx_pu))))
+        for con, f in (("TPf", "t_pf_s"), ("TQf", "t_qf_s"), ("TVf", "t_vf_s"), ("TIf", "t_if_s")):
+            conv = parts.get("converter")
+            if not out.missing and hasattr(conv, f) and float(getattr(conv, f)) == 0:
+                out.notes.append(f"{name}: {con} = 0 read as a {GFM_FILTER_FLOOR_S:g} s lag (a pass-through "
+                                 "would close an algebraic loop through the source)")
     if not out.missing and out.models["converter"] in GFM_MODELS:
         # a grid-forming converter is a whole unit: its own controls, no REEC/REPC/wind records
         extra = [r for r in out.models if r != "converter"]

@@ -1332,6 +1332,11 @@ class REGCV1(eqx.Module):
     """Nominal angular frequency 2 pi fn [rad/s]."""
 
     n_states = 8
+    angle_state = 1
+    """Index of the virtual rotor's angle delta in the state [rad]."""
+    judged_with_voltage_imposed = False
+    """Against an imposed terminal voltage its d axis has no synchronising power (two modes at 0
+    at rest): ``jaxdse check`` runs its steps without judging them."""
 
     def __check_init__(self):
         if self.inner not in ("pi", "lag"):
@@ -1409,6 +1414,425 @@ class REGCV1(eqx.Module):
         return y0, GfmReferences(p, q, vt, i_d, i_q)
 
 
+# --- REGFM_A1 ---------------------------------------------------------------------------------
+
+GFM_FILTER_FLOOR_S = 0.01
+"""REGFM_A1: a measurement filter (TPf, TQf, TVf) of 0 is kept as a lag of this time constant [s].
+A pass-through of Q would close an algebraic loop (E -> Q -> Vcmd -> E); PowerWorld likewise raises
+a filter below Mult x its time step to that value (WebHelp "Machine Model: REGFM_A1")."""
+
+
+def source_behind(e, delta, u: GfmInputs, re, xe, i_max, omega) -> GfmSignals:
+    """A voltage source E at angle ``delta`` behind Re + j Xe against the terminal voltage ``u``:
+    I = (E e^{j delta} - V) / (Re + j Xe), within the circular limit ``i_max`` that keeps its angle
+    (0: none; the states are not reset), and the outputs in the frame of ``delta``."""
+    c, s = jnp.cos(delta), jnp.sin(delta)
+    z2 = re**2 + xe**2
+    a, b = e * c - u.v_re_pu, e * s - u.v_im_pu
+    i_re, i_im = (a * re + b * xe) / z2, (b * re - a * xe) / z2
+    mag = jnp.hypot(i_re, i_im)
+    over = (i_max > 0) & (mag > i_max)
+    k = jnp.where(over, i_max / jnp.where(over, mag, 1.0), 1.0)
+    i_re, i_im = k * i_re, k * i_im
+    return GfmSignals(i_re, i_im, u.v_re_pu * i_re + u.v_im_pu * i_im, u.v_im_pu * i_re - u.v_re_pu * i_im,
+                      omega, delta, u.v_re_pu * c + u.v_im_pu * s, u.v_im_pu * c - u.v_re_pu * s,
+                      i_re * c + i_im * s, i_im * c - i_re * s)
+
+
+class REGFM_A1(eqx.Module):
+    """PSS/E REGFMA1 (WECC REGFM_A1): a droop-controlled grid-forming inverter, a voltage source
+    E at angle delta behind the coupling impedance Re + j Xe (the generator's ZSORCE on MBASE).
+
+    Block diagram (PNNL-35110, *Model Specification of Droop-Controlled, Grid-Forming Inverters
+    (REGFM_A1)*, 2023; record order of the PSS/E Model Library as psspy writes it; per unit on
+    MBASE, omega_0 = 2 pi f0):
+
+        filters:   Pm = 1/(1 + s TPf) P,  Qm = 1/(1 + s TQf) Q,  Vm = 1/(1 + s TVf) |V|
+        P limits:  dwPmax = min(0, kppmax (Pmax - Pm) + xPmax),  dxPmax/dt = kipmax (Pmax - Pm), xPmax <= 0
+                   dwPmin = max(0, kppmax (Pmin - Pm) + xPmin),  dxPmin/dt = kipmax (Pmin - Pm), xPmin >= 0
+        P-f droop: dw = mp (Pref - Pm) + dwPmax + dwPmin,  d(delta)/dt = omega_0 dw
+        Q limits:  dVQmax, dVQmin as dwPmax, dwPmin with kpqmax, kiqmax, Qmax, Qmin, Qm
+        Q-V droop: Vcmd = Vref + mq (Qref - Qm) + dVQmax + dVQmin
+        voltage:   VFlag = 0: E = clip(Vcmd, Emin, Emax);
+                   VFlag = 1: E = clip(kpv (Vcmd - Vm) + xE, Emin, Emax), dxE/dt = kiv (Vcmd - Vm)
+                   (xE non-windup within [Emin, Emax])
+        source:    I0 = (E e^{j delta} - V) / (Re + j Xe);  Imax > 0 and |I0| > Imax: I = Imax I0/|I0|
+                   (the current's angle kept; the states are not reset), else I = I0
+
+    P + jQ = V conj(I) with the limited current. QVFlag chooses which reference a plant controller
+    moves (0: Qref, 1: Vref with Qref = 0); with both references held, as in a playback, the two
+    are the same model. States: [delta, xE, Pm, Qm, Vm, xPmax, xPmin, xQmax, xQmin] (PowerWorld's
+    order, angle first). Its equivalent swing equation (TPf dw/dt = mp (Pref - P) - dw, within the
+    limits) has 2H = TPf / mp and D = 1 / mp on MBASE.
+    """
+
+    vflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
+    """VFlag (ICON): 0 the droop sets E directly, 1 a PI on the terminal voltage sets E."""
+    qvflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
+    """QVFlag (ICON): the plant controller's input, 0 Qref, 1 Vref (no effect with both held)."""
+    t_pf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TPf: active-power measurement filter [s] (0: :data:`GFM_FILTER_FLOOR_S`)."""
+    t_qf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TQf: reactive-power measurement filter [s] (0: :data:`GFM_FILTER_FLOOR_S`)."""
+    t_vf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TVf: terminal-voltage measurement filter [s] (0: :data:`GFM_FILTER_FLOOR_S`)."""
+    i_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """Imax: current limit [pu on MBASE] (0: none)."""
+    e_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.2)
+    """Emax: upper limit of the internal voltage [pu]."""
+    e_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Emin: lower limit of the internal voltage [pu]."""
+    p_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Pmax: active-power limit of the overload controller [pu on MBASE]."""
+    p_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Pmin: lower active-power limit [pu on MBASE] (negative for storage)."""
+    q_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """Qmax: reactive-power limit of the overload controller [pu on MBASE]."""
+    q_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-1.0)
+    """Qmin: lower reactive-power limit [pu on MBASE]."""
+    mp: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """mp: P-f droop [pu frequency / pu power] (> 0)."""
+    mq: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """mq: Q-V droop [pu voltage / pu reactive power] (>= 0)."""
+    kppmax: Float[Array, ""] = eqx.field(converter=as_float, default=0.01)
+    """kppmax: proportional gain of the Pmax/Pmin controllers [pu frequency / pu power]."""
+    kipmax: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """kipmax: integral gain of the Pmax/Pmin controllers [pu frequency / (pu power s)]."""
+    kpqmax: Float[Array, ""] = eqx.field(converter=as_float, default=3.0)
+    """kpqmax: proportional gain of the Qmax/Qmin controllers [pu voltage / pu reactive power]."""
+    kiqmax: Float[Array, ""] = eqx.field(converter=as_float, default=20.0)
+    """kiqmax: integral gain of the Qmax/Qmin controllers [pu voltage / (pu reactive power s)]."""
+    kpv: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """kpv: voltage PI proportional gain [pu / pu] (VFlag = 1)."""
+    kiv: Float[Array, ""] = eqx.field(converter=as_float, default=5.86)
+    """kiv: voltage PI integral gain [pu / (pu s)] (> 0)."""
+    re_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Re: coupling resistance [pu on MBASE] (the generator's ZSORCE, not a CON)."""
+    xe_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.15)
+    """Xe: coupling reactance [pu on MBASE] (the generator's ZSORCE, not a CON; > 0)."""
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * math.pi * 60.0)
+    """Nominal angular frequency 2 pi f0 [rad/s]."""
+
+    n_states = 9
+    angle_state = 0
+    """Index of the source's angle delta in the state [rad]."""
+    judged_with_voltage_imposed = True
+    """Against an imposed terminal voltage the source behind Xe synchronises (P turns with the
+    angle difference), so ``jaxdse check`` judges its steps."""
+
+    def __check_init__(self):
+        check_flag(self, "vflag", "qvflag")
+        check_positive(self, "mp", "kiv", "xe_pu", "omega_s_rad_s")
+        check_nonnegative(self, "t_pf_s", "t_qf_s", "t_vf_s", "i_max_pu", "mq", "kppmax", "kipmax",
+                          "kpqmax", "kiqmax", "kpv", "re_pu", "e_min_pu")
+        if all_concrete(self.e_max_pu, self.e_min_pu, self.p_max_pu, self.p_min_pu, self.q_max_pu,
+                        self.q_min_pu):
+            check_that(self, self.e_max_pu > self.e_min_pu,
+                       f"Emax must be > Emin, got {self.e_max_pu}, {self.e_min_pu}")
+            check_that(self, self.p_max_pu > self.p_min_pu,
+                       f"Pmax must be > Pmin, got {self.p_max_pu}, {self.p_min_pu}")
+            check_that(self, self.q_max_pu > self.q_min_pu,
+                       f"Qmax must be > Qmin, got {self.q_max_pu}, {self.q_min_pu}")
+
+    @property
+    def h_s(self):
+        """The inertia of its equivalent swing equation, H = TPf / (2 mp) [s on MBASE]."""
+        return self.t_pf_s / (2 * self.mp)
+
+    def _filter(self, t):
+        return jnp.maximum(t, GFM_FILTER_FLOOR_S)
+
+    def _overload(self, err, x, kp):
+        """(upper output <= 0, lower output >= 0) of the two limit PIs (err = (limit - measured))."""
+        return jnp.minimum(0.0, kp * err[0] + x[0]), jnp.maximum(0.0, kp * err[1] + x[1])
+
+    def _internal(self, y, refs: GfmReferences):
+        """(dw, Vcmd, E): the droops' outputs at state ``y``."""
+        pm, qm, vm = y[2], y[3], y[4]
+        up, lo = self._overload((self.p_max_pu - pm, self.p_min_pu - pm), (y[5], y[6]), self.kppmax)
+        dw = self.mp * (refs.p_ref_pu - pm) + up + lo
+        qu, ql = self._overload((self.q_max_pu - qm, self.q_min_pu - qm), (y[7], y[8]), self.kpqmax)
+        vcmd = refs.v_ref_pu + self.mq * (refs.q_ref_pu - qm) + qu + ql
+        e = jnp.where(self.vflag != 0, self.kpv * (vcmd - vm) + y[1], vcmd)
+        return dw, vcmd, jnp.clip(e, self.e_min_pu, self.e_max_pu)
+
+    def signals(self, y, u: GfmInputs, refs: GfmReferences) -> GfmSignals:
+        """The outputs at state ``y`` under terminal voltage ``u``."""
+        dw, _, e = self._internal(y, refs)
+        return source_behind(e, y[0], u, self.re_pu, self.xe_pu, self.i_max_pu, 1.0 + dw)
+
+    def vector_field(self, y, u: GfmInputs, refs: GfmReferences):
+        """d(state)/dt under terminal voltage ``u``."""
+        sig = self.signals(y, u, refs)
+        dw, vcmd, _ = self._internal(y, refs)
+        vt = jnp.hypot(u.v_re_pu, u.v_im_pu)
+        pm, qm, vm = y[2], y[3], y[4]
+        d_xe = jnp.where(self.vflag != 0,
+                         _blocked(y[1], self.kiv * (vcmd - vm), self.e_min_pu, self.e_max_pu), 0.0)
+        big = jnp.inf
+        return jnp.stack([
+            self.omega_s_rad_s * dw, d_xe,
+            (sig.p_pu - pm) / self._filter(self.t_pf_s), (sig.q_pu - qm) / self._filter(self.t_qf_s),
+            (vt - vm) / self._filter(self.t_vf_s),
+            _blocked(y[5], self.kipmax * (self.p_max_pu - pm), -big, 0.0),
+            _blocked(y[6], self.kipmax * (self.p_min_pu - pm), 0.0, big),
+            _blocked(y[7], self.kiqmax * (self.q_max_pu - qm), -big, 0.0),
+            _blocked(y[8], self.kiqmax * (self.q_min_pu - qm), 0.0, big)])
+
+    def initial_state(self, u: GfmInputs, i_re, i_im):
+        """(state, references): the steady state that delivers current ``I`` (out of the terminal,
+        network frame) at ``u``'s voltage: E e^{j delta} = V + (Re + j Xe) I, the filters at P, Q,
+        |V|, the limit controllers at 0, Pref = P; QVFlag = 0: Qref = Q, Vref = Vcmd; QVFlag = 1:
+        Qref = 0, Vref = Vcmd + mq Q (Vcmd = E with VFlag = 0, |V| with VFlag = 1)."""
+        vt = jnp.hypot(u.v_re_pu, u.v_im_pu)
+        e_re = u.v_re_pu + self.re_pu * i_re - self.xe_pu * i_im
+        e_im = u.v_im_pu + self.re_pu * i_im + self.xe_pu * i_re
+        e, delta = jnp.hypot(e_re, e_im), jnp.arctan2(e_im, e_re)
+        p = u.v_re_pu * i_re + u.v_im_pu * i_im
+        q = u.v_im_pu * i_re - u.v_re_pu * i_im
+        vcmd = jnp.where(self.vflag != 0, vt, e)
+        qv = self.qvflag != 0
+        q_ref = jnp.where(qv, 0.0, q)
+        v_ref = jnp.where(qv, vcmd + self.mq * q, vcmd)
+        zero = jnp.zeros_like(vt)
+        c, s = jnp.cos(delta), jnp.sin(delta)
+        y0 = jnp.stack([delta, e, p, q, vt, zero, zero, zero, zero])
+        return y0, GfmReferences(p, q_ref, v_ref, i_re * c + i_im * s, i_im * c - i_re * s)
+
+
+# --- REGFM_B1 ---------------------------------------------------------------------------------
+
+LIMIT_RESET_S = 1e-3
+"""REGFM_B1: a state outside a limit that moved past it (the angle limits dITmax, dITmin; E's
+limits Emin, Emax) is brought to it with this time constant [s] (a non-windup state sits on its
+limit; an ODE relaxes it, fast against every loop of the model)."""
+
+
+class REGFM_B1(eqx.Module):
+    """PSS/E REGFMB1U (WECC REGFM_B1): a grid-forming inverter with virtual-synchronous-machine
+    control, a voltage source E at angle delta_VSM behind Re + j XL (the generator's ZSORCE on
+    MBASE).
+
+    Block diagram (NREL/TP-5D00-90260, *Virtual Synchronous Machine Grid-Forming Inverter Model
+    Specification (REGFM_B1)*, 2024, as implementations that cite it write it out; CON order of
+    the PSS/E Model Library as psspy writes it; per unit on MBASE, omega_0 = 2 pi f0; the PLL
+    frame: V e^{-j dPLL} = VdPLL + j VqPLL, I e^{-j dPLL} = Id - j Iq, Iq > 0 injecting vars):
+
+        filters:  Pinv, Qinv, Vinv, Idinv, Iqinv = 1/(1 + s T) of P, Q, |V|, Id, Iq (TPf, TQf,
+                  TVf, TIf, TIf)
+        PLL:      VqPLL = |V| sin(theta - dPLL); below VPLLfrz both states frozen;
+                  dwPLL = clip(kpPLL VqPLL + xPLL, DwPLLmin, DwPLLmax), dxPLL/dt = kiPLL VqPLL,
+                  d(dPLL)/dt = omega_0 dwPLL
+        swing:    2H d(dwm)/dt = Pref + FFlag dP - Pinv - D1 dwm - D2 (dwm - xD), within
+                  [Dwmin, Dwmax] (non-windup); dxD/dt = wD (dwm - xD);
+                  dP = -(1/mp) 1/(1 + s Tp) (dwm, or dwPLL with wFlag = 1)
+        angle:    d(dIT)/dt = omega_0 (dwm - dwPLL) within [dITmin, dITmax] (non-windup);
+                  delta_VSM = dPLL + dIT
+        limits:   PQFlag = 1: IdmaxSS = kf ImaxSS, IqmaxSS = sqrt(ImaxSS^2 - Idinv^2);
+                  PQFlag = 0: IqmaxSS = kf ImaxSS, IdmaxSS = sqrt(ImaxSS^2 - Iqinv^2);
+                  Emax, Emin = sqrt((Vinv +- IqmaxSS XL)^2 + (Idinv XL)^2);
+                  dmax = asin(XL ImaxSS); d(dITmax)/dt = kI (IdmaxSS - Idinv) in [0, dmax];
+                  d(dITmin)/dt = kI (-Ke IdmaxSS - Idinv) in [-dmax, 0] (ESFlag = 1; 0 without)
+        Q-V:      Vcmd = Vref + mq (Qref - Qinv) (VdrpFlag = 0 or QVFlag = 0), Vref - mq Iqinv
+                  (current droop); E = clip(kpv (Vcmd - Vinv) + xV, Emin, Emax), dxV/dt = kiv
+                  (Vcmd - Vinv), non-windup within [Emin, Emax]
+        source:   I0 = (E e^{j delta_VSM} - V) / (Re + j XL); |I0| > ImaxF: I = ImaxF I0/|I0|
+
+    States: [Pinv, Qinv, Vinv, Idinv, Iqinv, xPLL, dPLL, xTp, xD, dwm, dIT, dITmax, dITmin, xV].
+    A filter time constant of 0 (TPf, TQf, TVf, TIf) is kept as a :data:`GFM_FILTER_FLOOR_S`
+    lag (a pass-through closes algebraic loops through the source); Tp = 0 is a pass-through.
+    """
+
+    wflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
+    """wFlag (ICON): the droop's speed, 0 the VSM's dwm, 1 the PLL's dwPLL."""
+    vdrpflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
+    """VdrpFlag (ICON): 0 Q-V droop, 1 current droop (with QVFlag = 1)."""
+    qvflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
+    """QVFlag (ICON): the plant controller's input, 0 Qref, 1 Vref."""
+    pqflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
+    """PQFlag (ICON): steady-state current priority, 0 reactive, 1 active."""
+    fflag: Int[Array, ""] = eqx.field(converter=as_flag, default=1)
+    """FFlag (ICON): 1 the P-f droop acts, 0 not."""
+    esflag: Int[Array, ""] = eqx.field(converter=as_flag, default=0)
+    """ESFlag (ICON): 1 storage (negative angle and current allowed), 0 a generator."""
+    mq: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """mq: Q-V droop [pu/pu] (a virtual impedance with VdrpFlag = 1)."""
+    kpv: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """kpv: voltage PI proportional gain [pu/pu]."""
+    kiv: Float[Array, ""] = eqx.field(converter=as_float, default=5.0)
+    """kiv: voltage PI integral gain [pu/(pu s)] (> 0)."""
+    mp: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """mp: P-f droop [pu speed / pu power] (> 0)."""
+    dw_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """Dwmax: upper limit of dwm [pu] (>= 0)."""
+    dw_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.05)
+    """Dwmin: lower limit of dwm [pu] (<= 0)."""
+    kp_pll: Float[Array, ""] = eqx.field(converter=as_float, default=0.265)
+    """kpPLL: PLL proportional gain [pu speed / pu voltage]."""
+    ki_pll: Float[Array, ""] = eqx.field(converter=as_float, default=2.65)
+    """kiPLL: PLL integral gain [pu speed / (pu voltage s)] (> 0)."""
+    dw_pll_max_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.2)
+    """DwPLLmax: PLL output upper limit [pu] (>= 0)."""
+    dw_pll_min_pu: Float[Array, ""] = eqx.field(converter=as_float, default=-0.2)
+    """DwPLLmin: PLL output lower limit [pu] (<= 0)."""
+    t_p_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Tp: lag of the droop's speed [s] (0: none)."""
+    h_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.5)
+    """H: virtual inertia constant [s on MBASE] (> 0)."""
+    d1_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """D1: steady-state damping [pu power / pu speed] (>= 0)."""
+    d2_pu: Float[Array, ""] = eqx.field(converter=as_float, default=100.0)
+    """D2: transient damping (through the washout) [pu power / pu speed] (>= 0)."""
+    w_d_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=50.0)
+    """wD: washout corner [rad/s] (> 0)."""
+    i_max_ss_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.0)
+    """ImaxSS: steady-state current limit [pu] (> 0; XL ImaxSS < 1)."""
+    kf: Float[Array, ""] = eqx.field(converter=as_float, default=0.9)
+    """kf: share of ImaxSS for the priority axis [-] (0 < kf <= 1)."""
+    k_i: Float[Array, ""] = eqx.field(converter=as_float, default=2.0)
+    """kI: gain of the angle-limit integrators [rad / (pu current s)] (> 0)."""
+    i_max_f_pu: Float[Array, ""] = eqx.field(converter=as_float, default=1.5)
+    """ImaxF: transient (fault) current limit [pu] (> 0: ignored at <= 0)."""
+    t_pf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TPf: P filter [s]."""
+    t_qf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TQf: Q filter [s]."""
+    t_vf_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TVf: |V| filter [s]."""
+    t_if_s: Float[Array, ""] = eqx.field(converter=as_float, default=0.02)
+    """TIf: current filter [s]."""
+    ke: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Ke: negative-current limit as a share of IdmaxSS [-] (storage; 0 <= Ke <= 1)."""
+    v_pll_frz_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.05)
+    """VPLLfrz: |V| below which the PLL freezes [pu]."""
+    re_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Re: coupling resistance [pu on MBASE] (the generator's ZSORCE, not a CON)."""
+    xe_pu: Float[Array, ""] = eqx.field(converter=as_float, default=0.1)
+    """XL: coupling reactance [pu on MBASE] (the generator's ZSORCE, not a CON; > 0)."""
+    omega_s_rad_s: Float[Array, ""] = eqx.field(converter=as_float, default=2 * math.pi * 60.0)
+    """Nominal angular frequency 2 pi f0 [rad/s]."""
+
+    n_states = 14
+    angle_state = 6
+    """Index of the PLL's angle, which turns with the imposed phasor [rad]."""
+    judged_with_voltage_imposed = True
+    """Against an imposed terminal voltage the source behind XL synchronises (P turns with dIT),
+    so ``jaxdse check`` judges its steps."""
+
+    def __check_init__(self):
+        check_flag(self, "wflag", "vdrpflag", "qvflag", "pqflag", "fflag", "esflag")
+        check_positive(self, "kiv", "mp", "ki_pll", "h_s", "w_d_rad_s", "i_max_ss_pu", "kf", "k_i", "xe_pu",
+                       "omega_s_rad_s")
+        check_nonnegative(self, "mq", "kpv", "kp_pll", "dw_max_pu", "dw_pll_max_pu", "t_p_s", "d1_pu",
+                          "d2_pu", "t_pf_s", "t_qf_s", "t_vf_s", "t_if_s", "ke", "re_pu", "v_pll_frz_pu")
+        if all_concrete(self.dw_min_pu, self.dw_pll_min_pu, self.kf, self.xe_pu, self.i_max_ss_pu, self.ke):
+            check_that(self, self.dw_min_pu <= 0, f"Dwmin must be <= 0, got {self.dw_min_pu}")
+            check_that(self, self.dw_pll_min_pu <= 0, f"DwPLLmin must be <= 0, got {self.dw_pll_min_pu}")
+            check_that(self, self.kf <= 1, f"kf must be <= 1, got {self.kf}")
+            check_that(self, self.ke <= 1, f"Ke must be <= 1, got {self.ke}")
+            check_that(self, self.xe_pu * self.i_max_ss_pu < 1,
+                       f"XL ImaxSS must be < 1 (dmax = asin(XL ImaxSS)), got {self.xe_pu * self.i_max_ss_pu}")
+
+    def _f(self, t):
+        return jnp.maximum(t, GFM_FILTER_FLOOR_S)
+
+    def _limits(self, y):
+        """(IdmaxSS, Emin, Emax, dmax) from the filtered current and voltage."""
+        vinv, idinv, iqinv = y[2], y[3], y[4]
+        room = lambda x: jnp.sqrt(jnp.maximum(self.i_max_ss_pu**2 - x**2, 0.0))  # noqa: E731
+        p_pri = self.pqflag != 0
+        id_max = jnp.where(p_pri, self.kf * self.i_max_ss_pu, room(iqinv))
+        iq_max = jnp.where(p_pri, room(idinv), self.kf * self.i_max_ss_pu)
+        xl = self.xe_pu
+        e_max = jnp.hypot(vinv + iq_max * xl, idinv * xl)
+        e_min = jnp.hypot(vinv - iq_max * xl, idinv * xl)
+        return id_max, e_min, e_max, jnp.arcsin(jnp.minimum(xl * self.i_max_ss_pu, 1.0))
+
+    def _pll(self, y, u):
+        vt = jnp.hypot(u.v_re_pu, u.v_im_pu)
+        vq = u.v_im_pu * jnp.cos(y[6]) - u.v_re_pu * jnp.sin(y[6])     # |V| sin(theta - dPLL)
+        dw = jnp.clip(self.kp_pll * vq + y[5], self.dw_pll_min_pu, self.dw_pll_max_pu)
+        return vt, vq, dw
+
+    def _command(self, y, refs: GfmReferences):
+        """(Vcmd, E) of the Q-V loop."""
+        _, e_min, e_max, _ = self._limits(y)
+        droop = (self.vdrpflag != 0) & (self.qvflag != 0)
+        vcmd = jnp.where(droop, refs.v_ref_pu - self.mq * y[4],
+                         refs.v_ref_pu + self.mq * (refs.q_ref_pu - y[1]))
+        return vcmd, jnp.clip(self.kpv * (vcmd - y[2]) + y[13], e_min, e_max)
+
+    def _angle(self, y):
+        lo = jnp.where(self.esflag != 0, y[12], 0.0)
+        return y[6] + jnp.clip(y[10], lo, y[11])
+
+    def signals(self, y, u: GfmInputs, refs: GfmReferences) -> GfmSignals:
+        """The outputs at state ``y`` under terminal voltage ``u``."""
+        _, e = self._command(y, refs)
+        return source_behind(e, self._angle(y), u, self.re_pu, self.xe_pu, self.i_max_f_pu, 1.0 + y[9])
+
+    def vector_field(self, y, u: GfmInputs, refs: GfmReferences):
+        """d(state)/dt under terminal voltage ``u``."""
+        sig = self.signals(y, u, refs)
+        vt, vq_pll, dw_pll = self._pll(y, u)
+        c, s = jnp.cos(y[6]), jnp.sin(y[6])
+        i_d = sig.i_re_pu * c + sig.i_im_pu * s            # the current in the PLL frame
+        i_q = -(sig.i_im_pu * c - sig.i_re_pu * s)
+        frz = vt < self.v_pll_frz_pu
+        sel = jnp.where(self.wflag != 0, dw_pll, y[9])
+        droop_w, d_tp = _lag(sel, y[7], self.t_p_s)
+        d_p = jnp.where(self.fflag != 0, -droop_w / self.mp, 0.0)
+        pd2 = self.d2_pu * (y[9] - y[8])
+        d_dwm = _blocked(y[9], (refs.p_ref_pu + d_p - y[0] - self.d1_pu * y[9] - pd2) / (2 * self.h_s),
+                         self.dw_min_pu, self.dw_max_pu)
+        id_max, e_min, e_max, dmax = self._limits(y)
+        lo = jnp.where(self.esflag != 0, y[12], 0.0)
+        d_it = self.omega_s_rad_s * (y[9] - dw_pll)
+        d_it = jnp.where(y[10] > y[11], (y[11] - y[10]) / LIMIT_RESET_S, jnp.where(
+            y[10] < lo, (lo - y[10]) / LIMIT_RESET_S, _blocked(y[10], d_it, lo, y[11])))
+        d_max = _blocked(y[11], self.k_i * (id_max - y[3]), 0.0, dmax)
+        d_max = jnp.where(y[11] > dmax, (dmax - y[11]) / LIMIT_RESET_S, d_max)
+        d_min = _blocked(y[12], self.k_i * (-self.ke * id_max - y[3]), -dmax, 0.0)
+        d_min = jnp.where(self.esflag != 0,
+                          jnp.where(y[12] < -dmax, (-dmax - y[12]) / LIMIT_RESET_S, d_min), 0.0)
+        vcmd, _ = self._command(y, refs)
+        d_xv = _blocked(y[13], self.kiv * (vcmd - y[2]), e_min, e_max)
+        d_xv = jnp.where(y[13] > e_max, (e_max - y[13]) / LIMIT_RESET_S,
+                         jnp.where(y[13] < e_min, (e_min - y[13]) / LIMIT_RESET_S, d_xv))
+        return jnp.stack([
+            (sig.p_pu - y[0]) / self._f(self.t_pf_s), (sig.q_pu - y[1]) / self._f(self.t_qf_s),
+            (vt - y[2]) / self._f(self.t_vf_s), (i_d - y[3]) / self._f(self.t_if_s),
+            (i_q - y[4]) / self._f(self.t_if_s),
+            jnp.where(frz, 0.0, self.ki_pll * vq_pll), jnp.where(frz, 0.0, self.omega_s_rad_s * dw_pll),
+            d_tp, self.w_d_rad_s * (y[9] - y[8]), d_dwm, d_it, d_max, d_min, d_xv])
+
+    def initial_state(self, u: GfmInputs, i_re, i_im):
+        """(state, references): the steady state that delivers current ``I`` (out of the terminal,
+        network frame) at ``u``'s voltage: E e^{j delta_VSM} = V + (Re + j XL) I, the PLL on V's
+        angle, dwm = 0, the angle limits at +-dmax (dITmin at 0 without ESFlag), Pref = P;
+        QVFlag = 0: Qref = Q, Vref = |V|; QVFlag = 1: Qref = 0, Vref = |V| + mq Q (current
+        droop: |V| + mq Iq)."""
+        vt = jnp.hypot(u.v_re_pu, u.v_im_pu)
+        theta = jnp.arctan2(u.v_im_pu, u.v_re_pu)
+        e_re = u.v_re_pu + self.re_pu * i_re - self.xe_pu * i_im
+        e_im = u.v_im_pu + self.re_pu * i_im + self.xe_pu * i_re
+        e, delta = jnp.hypot(e_re, e_im), jnp.arctan2(e_im, e_re)
+        p = u.v_re_pu * i_re + u.v_im_pu * i_im
+        q = u.v_im_pu * i_re - u.v_re_pu * i_im
+        c, s = jnp.cos(theta), jnp.sin(theta)
+        i_d, i_q = i_re * c + i_im * s, -(i_im * c - i_re * s)
+        d_it = jnp.arctan2(jnp.sin(delta - theta), jnp.cos(delta - theta))
+        dmax = jnp.arcsin(jnp.minimum(self.xe_pu * self.i_max_ss_pu, 1.0))
+        zero = jnp.zeros_like(vt)
+        qv, droop = self.qvflag != 0, (self.vdrpflag != 0) & (self.qvflag != 0)
+        q_ref = jnp.where(qv, 0.0, q)
+        v_ref = jnp.where(droop, vt + self.mq * i_q, jnp.where(qv, vt + self.mq * q, vt))
+        y0 = jnp.stack([p, q, vt, i_d, i_q, zero, theta, zero, zero, zero, d_it, dmax + zero,
+                        jnp.where(self.esflag != 0, -dmax, 0.0) + zero, e])
+        cd, sd = jnp.cos(delta), jnp.sin(delta)
+        return y0, GfmReferences(p, q_ref, v_ref, i_re * cd + i_im * sd, i_im * cd - i_re * sd)
+
+
 REGCV1_FIELDS: dict[str, str] = {
     "M": "m_s", "D": "d_pu", "kw": "kw_pu", "kv": "kv_pu", "ra": "ra_pu", "xs": "xs_pu",
     "Tc": "t_c_s", "Kpvd": "kpvd", "Kivd": "kivd", "Kpvq": "kpvq", "Kivq": "kivq",
@@ -1439,14 +1863,18 @@ def gfm_from_andes(model: str, params: dict, fn_hz: float = 60.0) -> REGCV1:
 IBR_MODELS: dict[str, type[eqx.Module]] = {"REGCA1": REGCA1, "REGCB1": REGCB1, "REECA1": REECA1,
                                             "REECB1": REECB1, "REECCU1": REECCU1, "REPCA1": REPCA1,
                                             "WTDTA1": WTDTA1, "WTARA1": WTARA1, "WTPTA1": WTPTA1,
-                                            "WTTQA1": WTTQA1, "REGCV1": REGCV1, "REGCV2": REGCV1}
+                                            "WTTQA1": WTTQA1, "REGCV1": REGCV1, "REGCV2": REGCV1,
+                                            "REGFM_A1": REGFM_A1, "REGFMA1": REGFM_A1,
+                                            "REGFM_B1": REGFM_B1, "REGFMB1U": REGFM_B1}
 """The inverter-based resource models by their PSS/E name (ANDES's for the grid-forming REGCV1
-and REGCV2: one module, ``inner`` "pi" or "lag")."""
+and REGCV2: one module, ``inner`` "pi" or "lag"; REGFM_A1 and REGFM_B1 as WECC, PowerWorld
+and PSLF name them, REGFMA1 and REGFMB1U as PSS/E does; the record is PSS/E's in either case)."""
 
 IBR_ROLES: dict[str, str] = {"REGCA1": "converter", "REGCB1": "converter", "REECA1": "electrical",
                              "REECB1": "electrical", "REECCU1": "electrical", "REPCA1": "plant",
                              "WTDTA1": "drive", "WTARA1": "aero", "WTPTA1": "pitch", "WTTQA1": "torque",
-                             "REGCV1": "converter", "REGCV2": "converter"}
+                             "REGCV1": "converter", "REGCV2": "converter", "REGFM_A1": "converter",
+                             "REGFMA1": "converter", "REGFM_B1": "converter", "REGFMB1U": "converter"}
 """What each model is in a plant: the converter, its electrical controls, the plant controller,
 and a type-3 wind turbine's drive train, aerodynamics, pitch and torque controllers."""
 
@@ -1461,6 +1889,19 @@ _REECB1_FIELDS = ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PQFLAG",
                   "PMIN", "Imax", "Tpord")
 
 _GFM_FIELDS = ("Tc", "kw", "kv", "M", "D", "ra", "xs", "Kpvd", "Kivd", "Kpvq", "Kivq")
+
+_REGFM_A1_FIELDS = ("VFlag", "QVFlag", "TPf", "TQf", "TVf", "Imax", "Emax", "Emin", "Pmax", "Pmin", "Qmax",
+                    "Qmin", "mp", "mq", "kppmax", "kipmax", "kpqmax", "kiqmax", "kpv", "kiv")
+_REGFM_A1_PARAMS = ("vflag", "qvflag", "t_pf_s", "t_qf_s", "t_vf_s", "i_max_pu", "e_max_pu", "e_min_pu",
+                    "p_max_pu", "p_min_pu", "q_max_pu", "q_min_pu", "mp", "mq", "kppmax", "kipmax",
+                    "kpqmax", "kiqmax", "kpv", "kiv")
+_REGFM_B1_FIELDS = ("wFlag", "VdrpFlag", "QVFlag", "PQFlag", "FFlag", "ESFlag", "mq", "kpv", "kiv", "mp",
+                    "Dwmax", "Dwmin", "kpPLL", "kiPLL", "DwPLLmax", "DwPLLmin", "Tp", "H", "D1", "D2", "wD",
+                    "ImaxSS", "kf", "kI", "ImaxF", "TPf", "TQf", "TVf", "TIf", "Ke", "VPLLfrz")
+_REGFM_B1_PARAMS = ("wflag", "vdrpflag", "qvflag", "pqflag", "fflag", "esflag", "mq", "kpv", "kiv", "mp",
+                    "dw_max_pu", "dw_min_pu", "kp_pll", "ki_pll", "dw_pll_max_pu", "dw_pll_min_pu", "t_p_s",
+                    "h_s", "d1_pu", "d2_pu", "w_d_rad_s", "i_max_ss_pu", "kf", "k_i", "i_max_f_pu", "t_pf_s",
+                    "t_qf_s", "t_vf_s", "t_if_s", "ke", "v_pll_frz_pu")
 
 IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw", "Tg", "Rrpwr", "Brkpt", "Zerox", "Lvpl1", "Volim", "Lvpnt1", "Lvpnt0",
@@ -1483,6 +1924,10 @@ IBR_FIELDS: dict[str, tuple[str, ...]] = {
     "WTTQA1": ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", *_WT_TABLE, "TRATE"),
     "REGCV1": _GFM_FIELDS + ("KpId", "KiId", "KpIq", "KiIq"),
     "REGCV2": _GFM_FIELDS + ("Tiq", "Tid"),
+    "REGFM_A1": _REGFM_A1_FIELDS,
+    "REGFMA1": _REGFM_A1_FIELDS,
+    "REGFM_B1": _REGFM_B1_FIELDS,
+    "REGFMB1U": _REGFM_B1_FIELDS,
 }
 """PSS/E names of each record's values after ``bus 'MODEL' id``, ICONs first, in PSS/E order
 (Siemens PTI, PSS/E Model Library). REGCV1 and REGCV2 have no PSS/E record: theirs is ANDES's
@@ -1493,7 +1938,9 @@ IBR_ICONS: dict[str, tuple[str, ...]] = {
     "REGCA1": ("Lvplsw",), "REECA1": ("IREG", "PFFLAG", "VFLAG", "QFLAG", "PFLAG", "PQFLAG"),
     "REPCA1": ("IREG", "FROM", "TO", "CKT", "VCFlag", "RefFlag", "Fflag"),
     "REGCB1": ("RateFlag", "PQFlag"), "REECB1": _REECB1_FIELDS[:5], "REECCU1": _REECB1_FIELDS[:5],
-    "WTDTA1": (), "WTARA1": (), "WTPTA1": (), "WTTQA1": ("Tflag",), "REGCV1": (), "REGCV2": ()}
+    "WTDTA1": (), "WTARA1": (), "WTPTA1": (), "WTTQA1": ("Tflag",), "REGCV1": (), "REGCV2": (),
+    "REGFM_A1": ("VFlag", "QVFlag"), "REGFMA1": ("VFlag", "QVFlag"),
+    "REGFM_B1": _REGFM_B1_FIELDS[:6], "REGFMB1U": _REGFM_B1_FIELDS[:6]}
 """The integer ICONs of each record (REPCA1's CKT is a circuit identifier, kept as text)."""
 
 _REECB1_PARAMS = ("remote_bus", "pfflag", "vflag", "qflag", "pqflag", "vdip_pu", "vup_pu", "t_rv_s",
@@ -1530,6 +1977,10 @@ IBR_PARAMETERS: dict[str, dict[str, str]] = {
                        ("Tflag", "Kpp", "Kip", "Tp", "Twref", "Temax", "Temin", "TRATE"))),
     "REGCV1": {f: c for c, f in REGCV1_FIELDS.items() if c in IBR_FIELDS["REGCV1"]},
     "REGCV2": {f: c for c, f in REGCV1_FIELDS.items() if c in IBR_FIELDS["REGCV2"]},
+    "REGFM_A1": dict(zip(_REGFM_A1_PARAMS, _REGFM_A1_FIELDS)),
+    "REGFMA1": dict(zip(_REGFM_A1_PARAMS, _REGFM_A1_FIELDS)),
+    "REGFM_B1": dict(zip(_REGFM_B1_PARAMS, _REGFM_B1_FIELDS)),
+    "REGFMB1U": dict(zip(_REGFM_B1_PARAMS, _REGFM_B1_FIELDS)),
 }
 """Field -> PSS/E name of each model (for the record messages and a written-back record)."""
 
@@ -1617,8 +2068,8 @@ def record_readings(model: str, constants: Sequence) -> list[str]:
 
 
 def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
-    """The module of an inverter-based resource's .dyr record: ``model`` (REGCA1, REECA1,
-    REPCA1, WTDTA1, WTARA1, WTPTA1, WTTQA1) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
+    """The module of an inverter-based resource's .dyr record: ``model`` (one of
+    :data:`IBR_MODELS`) and its values after ``bus 'MODEL' id``, ICONs then CONs in PSS/E order
     (:data:`IBR_FIELDS`). Raises a one-line ValueError for an unknown model, a wrong number of
     values, a non-number, a non-integer ICON or invalid constants (named as the record names
     them)."""
@@ -1668,12 +2119,13 @@ def ibr_from_dyr(model: str, constants: Sequence) -> eqx.Module:
                        ("pflag", "PFLAG"), ("pqflag", "PQFLAG" if name != "REGCB1" else "PQFlag"),
                        ("rateflag", "RateFlag"), ("vcflag", "VCFlag"),
                        ("refflag", "RefFlag"), ("fflag", "Fflag"), ("tflag", "Tflag")):
-            msg = msg.replace(f"{name}.{f} ", f"{con} ")
+            msg = msg.replace(f"{name}.{f} ", f"{fields.get(f, con)} ")
         raise ValueError(record_message(msg, name, fields)) from None
 
 
 __all__ = ["GfmInputs", "GfmReferences", "GfmSignals", "IQR_ZERO_IS_OPEN", "REECB1", "REECCU1", "REGCB1",
-           "REGCV1", "REGCV1_FIELDS", "TG_BYPASS_S", "gfm_from_andes", "record_readings", "VDL_OPEN_PU",
+           "GFM_FILTER_FLOOR_S", "LIMIT_RESET_S", "REGCV1", "REGFM_A1", "REGFM_B1",
+           "REGCV1_FIELDS", "TG_BYPASS_S", "gfm_from_andes", "record_readings", "VDL_OPEN_PU",
            "vdl_points", "vdl_trailing_zeros", "IBR_FIELDS", "IBR_ICONS", "IBR_MODELS", "IBR_PARAMETERS",
            "IBR_ROLES", "LVPL_OPEN_PU",
            "LVPL_RESET_S",
