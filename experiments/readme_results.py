@@ -48,6 +48,23 @@ def _interconnection(r: dict) -> str:
     return text + f"; peak memory {r['peak_rss_mib']:.0f} MiB."
 
 
+def _second_run(rows: list, mon: dict) -> str:
+    """The capacity part's run of the whole-interconnection case, when it holds one (the same case run
+    after the smaller configurations, in the same process), beside the part of its own."""
+    big = [r for r in rows if r["units"] > 1000]
+    if not big or "interconnection" not in mon:
+        return ""
+    r, whole, steady = big[0], big[0].get("inertia_delay_s") or {}, big[0].get("steady_inertia_delay_s") or {}
+    off = r.get("backlog_worked_off_after_s")
+    nan = float("nan")
+    return (" The same case run again as the capacity part's last configuration, after the six smaller "
+            "ones in the same process: the start worked off "
+            f"{'not within the run' if off is None else f'{off:g} s'} after the first update; the area "
+            f"estimates 99 % {whole.get('p99', nan):.1f} s over the whole run ({steady.get('p99', nan):.2f} s "
+            "after the start); busy fraction "
+            f"{r['busy_fraction']:.2f}; peak memory {r['peak_rss_mib']:.0f} MiB.")
+
+
 def load(rel: str):
     path = ROOT / rel
     return json.loads(path.read_text()) if path.exists() else None
@@ -257,7 +274,8 @@ def block() -> str:
                + ", 99 % " + " and ".join(f"{r['delay_s']['p99']:.3f} s" for r in mon["speed"]["rows"])
                + f" of stream time (differences {mon['speed']['difference_s']['median']:.3f} s and "
                f"{mon['speed']['difference_s']['p99']:.3f} s).")
-            + ("" if "interconnection" not in mon else _interconnection(mon["interconnection"]["rows"][0])))
+            + ("" if "interconnection" not in mon else _interconnection(mon["interconnection"]["rows"][0]))
+            + _second_run(c, mon))
 
     tb = load("benchmarks/results.json")
     if tb:
