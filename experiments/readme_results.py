@@ -60,8 +60,8 @@ def _second_run(rows: list, mon: dict) -> str:
     return (" The same case run again as the capacity part's last configuration, after the six smaller "
             "ones in the same process: the start worked off "
             f"{'not within the run' if off is None else f'{off:g} s'} after the first update; the area "
-            f"estimates 99 % {whole.get('p99', nan):.1f} s over the whole run ({steady.get('p99', nan):.2f} s "
-            "after the start); busy fraction "
+            f"estimates 99 % {whole.get('p99', nan):.1f} s over the whole run "
+            f"({steady.get('p99', nan):.2f} s after the start); busy fraction "
             f"{r['busy_fraction']:.2f}; peak memory {r['peak_rss_mib']:.0f} MiB.")
 
 
