@@ -375,7 +375,7 @@ def gfm_entry(v: dict) -> dict:
         "H_s": v["H_s"], "H_ci95": v["H_ci95"], "H_reference_s": v["H_record_s"],
         "H_error_percent": 100 * (v["H_s"] / v["H_record_s"] - 1),
         "D": v["D"], "D_ci95": v["D_ci95"], "D_record": v["D_record"],
-        "D_verdict": d_word, "damping": {"verdict": d_word, "reasons": [v["meaning"] or GFM_D_MEANING]},
+        "D_verdict": d_word, "damping": {"verdict": d_word, "reasons": [v["d_meaning"] or GFM_D_MEANING]},
         "verdict": v["verdict"], "reasons": v["reasons"],
         "interval": {"relative_ci_percent": half, "noise_percent": None, "filter_spread_percent": None,
                      "filter_refits_counted": None, "condition": None},

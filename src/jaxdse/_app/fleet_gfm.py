@@ -42,6 +42,10 @@ B1_MEANING = ("the virtual synchronous machine's swing equation 2H d(dwm)/dt = P
               "- D1 dwm - D2 s/(s + wD) dwm: H [s on MBASE] and the P-f droop mp of the record fitted to "
               "the recording by its playback; D = 1/mp + D1 [pu power / pu speed] is its steady-state "
               "damping (D1 alone with FFlag = 0; the washout's D2 acts in transients only)")
+B1_D_MEANING = ("D = FFlag/mp + D1 [pu power / pu speed]: the steady-state damping of the record's P-f droop "
+                "and D1, from the fitted mp; the washout's transient damping D2 is not in it")
+A1_D_MEANING = ("D = 1/mp [pu power / pu speed]: the damping of the droop's equivalent swing equation, from "
+                "the fitted mp")
 A1_MEANING = ("the droop's equivalent swing equation TPf/mp d(dw)/dt = Pref - P - dw/mp: H = TPf / (2 mp) "
               "[s on MBASE] and D = 1/mp [pu power / pu speed], from the record's P filter TPf and P-f droop "
               "mp fitted to the recording by its playback")
@@ -147,6 +151,7 @@ def virtual_inertia(front, dyr: DyrOutcome, playback: PlaybackSettings, opts) ->
             "fitted": {lab: {"value": float(v), "ci95": [float(c) for c in ci], "record": r}
                        for lab, v, ci, r in zip(labels, cal.values, cal.ci95, (x0, y0))},
             "meaning": A1_MEANING if droop else B1_MEANING if vsm else None,
+            "d_meaning": A1_D_MEANING if droop else B1_D_MEANING if vsm else None,
             "verdict": verdict, "reasons": reasons, "relative_ci_percent": 100 * half,
             "rms_before_pu": [float(v) for v in cal.rms_before_pu],
             "rms_after_pu": [float(v) for v in cal.rms_after_pu]}
