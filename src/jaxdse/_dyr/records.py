@@ -72,7 +72,6 @@ virtual synchronous machine REGFM_B1, H a constant of its record): a
 :class:`GfmUnit` each."""
 
 
-
 @dataclass
 class UnitModel:
     """One generator's .dyr model, or why it has none."""
@@ -151,10 +150,10 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
         if role not in out.models:
             out.missing.append(f"generator {bus} {machine_id!r}: no {role} record "
                                f"({', '.join(m for m, r in IBR_ROLES.items() if r == role)})")
+    mid = str(machine_id).strip().upper()
+    g = None if raw is None else next(      # the generator record: its ZSORCE
+        (x for x in raw.generators if x.bus == int(bus) and x.id.strip().upper() == mid), None)
     if not out.missing and out.models["converter"] == "REGCB1":
-        mid = str(machine_id).strip().upper()
-        g = None if raw is None else next(
-            (x for x in raw.generators if x.bus == int(bus) and x.id.strip().upper() == mid), None)
         conv = parts["converter"]
         if g is None:
             out.notes.append("REGCB1: no generator record for its source impedance ZSORCE: a current "
@@ -166,9 +165,6 @@ def ibr_model(dyr: DyrData, bus: int, machine_id: str, raw: RawCase | None = Non
                 out.notes.append(f"REGCB1: Te = {float(conv.t_e_s):g} s with ZSORCE = 0: a current source "
                                  "(Te not used)")
     if not out.missing and out.models["converter"] in ("REGFM_A1", "REGFMA1", "REGFM_B1", "REGFMB1U"):
-        mid = str(machine_id).strip().upper()
-        g = None if raw is None else next(
-            (x for x in raw.generators if x.bus == int(bus) and x.id.strip().upper() == mid), None)
         name = out.models["converter"]
         if g is None:
             out.missing.append(f"generator {bus} {machine_id!r}: {name} is a voltage source behind the "
