@@ -86,18 +86,13 @@ def virtual_inertia(front, dyr: DyrOutcome, playback: PlaybackSettings, opts) ->
     conv = unit.converter
     droop = isinstance(conv, REGFM_A1)
     vsm = isinstance(conv, REGFM_B1)
-    if vsm:
-        x0, y0 = float(conv.h_s), float(conv.mp)
+    if vsm or droop:   # (field, label) of the two constants fitted, both positive, bounds x/f..x*f
+        fitted = (("h_s", "H"), ("mp", "mp")) if vsm else (("t_pf_s", "TPf"), ("mp", "mp"))
+        x0, y0 = (float(getattr(conv, f)) for f, _ in fitted)
+        labels = tuple(lab for _, lab in fitted)
         specs = [ParameterSpec("converter", f, lab, *map(float, opts.bounds.get(
                      lab, (x / opts.bound_factor, x * opts.bound_factor))))
-                 for f, lab, x in (("h_s", "H", x0), ("mp", "mp", y0))]
-        labels = ("H", "mp")
-    elif droop:
-        x0, y0 = float(conv.t_pf_s), float(conv.mp)
-        labels, fields = ("TPf", "mp"), ("t_pf_s", "mp")
-        specs = [ParameterSpec("converter", f, lab, *map(float, opts.bounds.get(
-                     lab, (x / opts.bound_factor, x * opts.bound_factor))))
-                 for f, lab, x in zip(fields, labels, (x0, y0))]
+                 for (f, lab), x in zip(fitted, (x0, y0))]
     else:
         x0, y0 = float(conv.m_s), float(conv.d_pu)
         labels = ("M", "D")
