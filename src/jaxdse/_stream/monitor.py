@@ -54,7 +54,7 @@ from .._io.schema import no_unknown, read_toml, subtable, typed_value
 from . import c37118 as c3
 from .online import OnlineGroup, Update
 from .pmu_sim import PmuClient, Units, served_units, short_names
-from .waits import Backoff, call, join, put
+from .waits import Backoff, call, join, put, wait_ready
 
 FREQUENCY_RANGE_HZ = 5.0
 """A frequency this far from nominal is no measurement (the readers' ``MAX_FREQUENCY_SAMPLE_OFFSET_HZ``)."""
@@ -65,9 +65,6 @@ MAX_PENDING_FRAMES = 4096
 grid slots remembered to tell a repeated frame from a late one."""
 PROGRESS_S = 5.0
 """While a unit's window fills (no estimate yet), a line every this many seconds [s, wall]."""
-READY_S = 600.0
-"""A reader waits at most this long [s] for the main thread to take a stream's configuration
-(and compile the estimators) before it turns data on."""
 GATE_S = 60.0
 """With several streams, a stream whose estimators are ready waits at most this long [s] for the
 others' before it turns data on (:class:`_StartGate`)."""
@@ -308,12 +305,7 @@ def _reader(k: int, spec: StreamSpec, out: queue.Queue, stop: threading.Event, l
             with PmuClient(spec.host, spec.port, spec.idcode, timeout=spec.timeout_s,
                            udp=spec.transport == "udp") as pmu:
                 send("frame", pmu.config(c3.CFG2))
-                deadline = time.monotonic() + READY_S
-                while ready is not None and not ready.wait(0.2) and not stop.is_set():
-                    if time.monotonic() > deadline:
-                        log(f"stream {k}: the estimators were not ready {READY_S:g} s after the configuration "
-                            "came; data turned on anyway")
-                        break
+                wait_ready(ready, stop, log, k)
                 pmu.start()
                 send("up", f"{spec.host}:{spec.port}")
                 up = True
@@ -999,7 +991,7 @@ class Monitor:
             if s.spec.protocol == "sttp":
                 from .sttp import reader as target
 
-                args = args[:5] + ([given or full for given, full, _ in s.wanted],)
+                args = args + ([given or full for given, full, _ in s.wanted],)
             threads.append(threading.Thread(target=target, args=args, daemon=True, name=f"jaxdse-stream-{k}"))
         for t in threads:
             t.start()

@@ -73,7 +73,7 @@ import numpy as np
 from .._io.errors import InputError
 from . import c37118 as c3
 from .publish import AREA_ANALOGS, area_station, area_values, published_values
-from .waits import Backoff, join, put
+from .waits import Backoff, join, put, wait_ready
 
 DEFAULT_PORT = 7165
 """The input's default port (a [[stream]] with protocol = "sttp" and no port)."""
@@ -605,15 +605,17 @@ def mapping(records, stations: list[str], rate_hz: float):
     return served, points, int(round(rate))
 
 
-def reader(k: int, spec, out: queue.Queue, stop: threading.Event, log, stations: list[str]):
+def reader(k: int, spec, out: queue.Queue, stop: threading.Event, log, ready, stations: list[str]):
     """One STTP stream's thread (the C37.118 reader's contract): puts (k, "frame", ConfigFrame
     or DataFrame, arrival), (k, "up" / "down" / "refused", text, arrival) and (k, "counts",
     dict, arrival) on ``out`` (``arrival``: ``time.monotonic()`` when the frame was complete);
-    ``stations``: the station names to subscribe to."""
+    ``stations``: the station names to subscribe to. As for C37.118, the subscription (the data)
+    starts once ``ready.wait`` says so (None: at once), or ``READY_S`` after the metadata came:
+    a publisher does not wait for a subscriber whose main thread compiles."""
     backoff = Backoff()
     state = {"cfgcnt": -1, "layout": None}
     while not stop.is_set():
-        session = _Session(k, spec, out, stations, state)
+        session = _Session(k, spec, out, stations, state, ready, log)
         try:
             session.run(stop)
         except _Resubscribe:
@@ -657,10 +659,11 @@ class _Session:
     """One connection of :func:`reader`: the subscriber's callbacks put what they get in a
     bounded inbox, which the reader's thread empties."""
 
-    def __init__(self, k, spec, out, stations, state):
+    def __init__(self, k, spec, out, stations, state, ready=None, log=print):
         from sttp import Subscriber
 
         self.k, self.spec, self.out, self.stations, self.state = k, spec, out, stations, state
+        self.ready, self.log = ready, log
         self.inbox: queue.Queue = queue.Queue(maxsize=MAX_INBOX)
         self.lost = {"inbox_overflow": 0}
         self.errors: list[str] = []
@@ -702,11 +705,13 @@ class _Session:
         self.sub.subscribe(filter_expression(self.stations), Settings())
         # one try (the reader backs off itself); retryinterval > 0: with 0, sttpapi 0.7.6's connector
         # resets its count of tries before each one and never gives up
-        config = Config(maxretries=1, retryinterval=0.01, autoreconnect=False, socket_timeout=spec.timeout_s)
+        config = Config(maxretries=1, retryinterval=0.01, autoreconnect=False, socket_timeout=spec.timeout_s,
+                        autosubscribe=False)        # subscribed below, once the estimators are ready
         err = self.sub.connect(f"{spec.host}:{spec.port}", config)
         if err is not None or not self.sub.connected:
             raise ConnectionError(f"cannot connect ({err or 'not connected'})")
         last = reported = time.monotonic()
+        subscribed = False
         while not stop.is_set():
             try:
                 kind, x = self.inbox.get(timeout=0.2)
@@ -714,8 +719,12 @@ class _Session:
                 kind = x = None
             now = time.monotonic()
             if kind == "meta":
-                last = now
                 self._metadata()
+                if not subscribed:
+                    wait_ready(self.ready, stop, self.log, self.k)
+                    self.sub.subscribe(filter_expression(self.stations), Settings())
+                    subscribed = True
+                last = now = time.monotonic()
             elif kind == "data":
                 last = now
                 if self.asm is not None:

@@ -12,9 +12,25 @@ from __future__ import annotations
 
 import queue
 import threading
+import time
 
 FIRST_BACKOFF_S = 0.5
 MAX_BACKOFF_S = 10.0
+READY_S = 600.0
+"""A reader waits at most this long [s] for the main thread to take a stream's configuration
+(and compile the estimators) before it turns data on."""
+
+
+def wait_ready(ready, stop: threading.Event, log, k: int):
+    """A reader's wait, before it turns its stream's data on, until ``ready.wait`` says the main
+    thread has taken the configuration and compiled the estimators (None: no wait), the monitor
+    stops, or ``READY_S`` passes (said in the log)."""
+    deadline = time.monotonic() + READY_S
+    while ready is not None and not ready.wait(0.2) and not stop.is_set():
+        if time.monotonic() > deadline:
+            log(f"stream {k}: the estimators were not ready {READY_S:g} s after the configuration came; "
+                "data turned on anyway")
+            return
 
 
 class Backoff:
