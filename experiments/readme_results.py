@@ -390,6 +390,15 @@ def block() -> str:
                    "compiled with jaxdse's XLA options (LLVM level 1, XLA's classic emitters) against "
                    "XLA's defaults: "
                    + "; ".join(parts) + f"; H agrees within {worst:.0e} s.")
+    sp = load("benchmarks/suite_profile.json")
+    if sp:
+        t = sp["totals"]
+        top = ", ".join(f"`{f['file'].split('/')[-1]}` {f['wall_s']:.0f} s" for f in sp["files"][:4])
+        out.append(f"- **Where the suite's time goes** (`benchmarks/suite_profile.py`, {sp['machine']}, JAX's "
+                   f"compile events per test): {t['tests']} tests, {sp['elapsed_s']:.0f} s elapsed, "
+                   f"{t['cpu_s']:.0f} s of CPU in the tests, of which XLA's backend compile "
+                   f"{100 * t['compile_share']:.0f} %, tracing {100 * t['trace_share']:.0f} % and lowering "
+                   f"{100 * t['lower_share']:.0f} % ({t['compiles']} compilations); the longest files: {top}.")
     read = load("benchmarks/read_24h.json")
     if read:
         out.append(f"- **Reading** a 24 h, 50 frames/s CSV (`benchmarks/read_24h.py`): "
