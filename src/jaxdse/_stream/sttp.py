@@ -702,6 +702,8 @@ class _Session:
         from sttp.settings import Settings
 
         spec = self.spec
+        # the subscription's settings, needed before the connection (without them no measurement
+        # comes, tested); the subscription itself is sent below, once the estimators are ready
         self.sub.subscribe(filter_expression(self.stations), Settings())
         # one try (the reader backs off itself); retryinterval > 0: with 0, sttpapi 0.7.6's connector
         # resets its count of tries before each one and never gives up
