@@ -392,13 +392,24 @@ def block() -> str:
                    + "; ".join(parts) + f"; H agrees within {worst:.0e} s.")
     sp = load("benchmarks/suite_profile.json")
     if sp:
-        t = sp["totals"]
-        top = ", ".join(f"`{f['file'].split('/')[-1]}` {f['wall_s']:.0f} s" for f in sp["files"][:4])
-        out.append(f"- **Where the suite's time goes** (`benchmarks/suite_profile.py`, {sp['machine']}, JAX's "
-                   f"compile events per test): {t['tests']} tests, {sp['elapsed_s']:.0f} s elapsed, "
-                   f"{t['cpu_s']:.0f} s of CPU in the tests, of which XLA's backend compile "
-                   f"{100 * t['compile_share']:.0f} %, tracing {100 * t['trace_share']:.0f} % and lowering "
-                   f"{100 * t['lower_share']:.0f} % ({t['compiles']} compilations); the longest files: {top}.")
+        q, a = sp["tiers"].get("quick"), sp["tiers"].get("all")
+        parts = []
+        if q:
+            parts.append(f"README's test command (the tests not marked `slow`): "
+                         f"{q['totals']['tests']} tests, {q['elapsed_s']:.0f} s elapsed "
+                         f"(pytest exit {q['pytest_exit']})")
+        if a:
+            t = a["totals"]
+            top = ", ".join(f"`{f['file'].split('/')[-1]}` {f['wall_s']:.0f} s" for f in a["files"][:4])
+            parts.append(f"the whole suite (`python -m pytest -q tests -m ''`): {t['tests']} tests, "
+                         f"{a['elapsed_s']:.0f} s elapsed (pytest exit {a['pytest_exit']}), "
+                         f"{t['cpu_s']:.0f} s of CPU in the tests, of which XLA's backend compile "
+                         f"{100 * t['compile_share']:.0f} %, tracing {100 * t['trace_share']:.0f} % "
+                         f"and lowering {100 * t['lower_share']:.0f} % "
+                         f"({t['compiles']} compilations); the longest files: {top}; tests not marked `slow` "
+                         f"that took {sp['slow_s']:g} s or more: {len(a['unmarked_over_s'])}")
+        out.append(f"- **The suite's time** (`benchmarks/suite_profile.py`, {sp['machine']}, JAX's compile "
+                   f"events per test): " + "; ".join(parts) + ".")
     read = load("benchmarks/read_24h.json")
     if read:
         out.append(f"- **Reading** a 24 h, 50 frames/s CSV (`benchmarks/read_24h.py`): "

@@ -106,6 +106,7 @@ def checked(tmp_path_factory):
     return main(["check", str(case), "--out", str(tmp / "out")]), tmp / "out"
 
 
+@pytest.mark.slow
 def test_outcomes_reasons_and_json(checked):
     rc, out = checked
     assert rc == 0  # whatever the outcomes
@@ -154,6 +155,7 @@ def test_outcomes_reasons_and_json(checked):
     assert "sortable" in page and "EXST2" in page and "data problem" in page
 
 
+@pytest.mark.slow
 def test_an_inverter_based_plant_is_checked(checked):
     """Bus 9's REGCA1 + REECA1 (QFLAG = 0) + REPCA1 (Fflag = 1, droop Ddn = 20): steady at rest, settles after
     the 2 % voltage step (Q answers) and the 0.1 Hz step (P falls by the droop); bus 13's WT4G1 is
@@ -328,6 +330,7 @@ def test_a_group_past_its_limit_is_marked_and_the_check_goes_on(tmp_path, monkey
                                                  "TGOV1 (3 unit(s), tsit5)"), units[n]["reasons"]
 
 
+@pytest.mark.slow
 def test_no_lapack_call_in_the_check_programs():
     """The check's vmapped programs hold no LAPACK custom call: with one (``eigvals`` of the
     Jacobian, Kvaerno5's LU) inside, two groups run side by side wedged XLA's CPU runtime (both

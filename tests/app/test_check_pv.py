@@ -47,6 +47,7 @@ def doc(tmp_path_factory):
     return {e["name"]: e for e in out["units"]}
 
 
+@pytest.mark.slow
 def test_a_pv_plant_is_checked(doc):
     plant = doc["9_1"]
     assert plant["category"] == "inverter-based" and plant["outcome"] == "pass", plant["reasons"]
@@ -56,6 +57,7 @@ def test_a_pv_plant_is_checked(doc):
     assert n["fstep_p_change_pu"] < -1e-3              # over-frequency: P down by REPCA1's droop
 
 
+@pytest.mark.slow
 def test_a_storage_plant_is_checked(doc):
     plant = doc["10_1"]
     assert plant["outcome"] == "pass", plant["reasons"]
@@ -66,6 +68,7 @@ def test_a_storage_plant_is_checked(doc):
     assert any("state of charge" in note for note in plant["notes"])
 
 
+@pytest.mark.slow
 def test_a_storage_plant_at_its_soc_limit_is_a_data_problem(doc):
     plant = doc["11_1"]
     assert plant["outcome"] == "data problem"
@@ -73,6 +76,7 @@ def test_a_storage_plant_at_its_soc_limit_is_a_data_problem(doc):
     assert "SOCini = 0.2 at or beyond SOCmin = 0.2 with P0 = 0.1 pu" in plant["reasons"][0]
 
 
+@pytest.mark.slow
 def test_a_storage_plant_that_empties_within_the_check_is_a_data_problem(doc):
     plant = doc["12_1"]
     assert plant["outcome"] == "data problem" and plant["records_at_fault"] == ["REECCU1"]

@@ -38,6 +38,7 @@ def test_demo_command_writes_contract(demo_run):
             assert (out / f"{fig}_{e['name']}.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_figures_have_labelled_axes_with_units(ambient, plant, estimate_jit, tmp_path, monkeypatch):
     import matplotlib.pyplot as plt
 
@@ -54,6 +55,7 @@ def test_figures_have_labelled_axes_with_units(ambient, plant, estimate_jit, tmp
     assert any("time [s]" == x for x, _ in labels)
 
 
+@pytest.mark.slow
 def test_help_teaches(tmp_path):
     """Through the installed console script, in a real process: the entry point works, --help
     teaches, and bad input is exit status 2 with one line on stderr (the other CLI tests call
@@ -134,6 +136,7 @@ def test_compilation_cache_folder(tmp_path):
     assert (tmp_path / "c").is_dir()
 
 
+@pytest.mark.slow
 def test_assessment_holds_no_host_callback(cut25, plant):
     """A host callback (diffrax's runtime check of t0, t1 and dt0, were they traced) keeps an
     executable out of JAX's persistent cache: the whole assessment must hold none."""

@@ -116,6 +116,7 @@ def test_fleet_dyr_plays_a_stiff_record_back_with_kvaerno5(fleet_run):
     assert "Kvaerno5" in (tmp / "out" / "units" / "B3_G1.html").read_text()
 
 
+@pytest.mark.slow
 def test_validate_recovers_planted_h_and_round_trips(tmp_path):
     """H planted 15 % high in the .dyr: the calibration on two events brings it back to the
     ANDES value, calibrated.dyr reads back, and a fleet run on [case.dyr, calibrated.dyr]

@@ -58,6 +58,7 @@ def ieee14(tmp_path_factory):
     return 0, out, json.loads((out / "fleet.json").read_text()) | {"returned": doc}
 
 
+@pytest.mark.slow
 def test_fleet_json_and_report(ieee14):
     rc, out, doc = ieee14
     assert rc == 0
@@ -111,6 +112,7 @@ def test_fleet_json_and_report(ieee14):
     assert "Every generator record of the case" in head and "<b>5</b> generator records" in head
 
 
+@pytest.mark.slow
 def test_fleet_writes_the_system_inertia(ieee14):
     """[inertia]: every plant online and measured where its H is identified (a weakly identified
     one is not: its model H), the rest at the .dyr H; E = sum of the terms, and the truth (sum H_true S = 2550 MW s, the
@@ -136,6 +138,7 @@ def test_fleet_writes_the_system_inertia(ieee14):
     assert (out / "inertia.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_damping_is_named_for_what_it_is(ieee14):
     """D: what it is and is not, stated once per page, never as the record's D; its own verdict,
     ``negative`` where its interval excludes 0 from below (B1_G1 of the line trip), on the page

@@ -69,6 +69,7 @@ def _case(tmp_path, m_s) -> Path:
     return path
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("factor", [1.5])
 def test_fleet_identifies_the_virtual_inertia(tmp_path, factor):
     """H planted 50 % high in the record: the fleet's fit finds the truth within 2 %, its interval

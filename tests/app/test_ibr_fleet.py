@@ -64,6 +64,7 @@ def ibr_run(tmp_path_factory):
     return tmp, json.loads((tmp / "out" / "fleet.json").read_text()), labels
 
 
+@pytest.mark.slow
 def test_ibr_plant_plays_back_its_own_records(ibr_run):
     tmp, doc, _ = ibr_run
     (u,) = doc["units"]
@@ -85,6 +86,7 @@ def test_ibr_plant_plays_back_its_own_records(ibr_run):
     assert doc["accounting"]["summary"]["in_fleet"] == 1
 
 
+@pytest.mark.slow
 def test_ibr_plant_has_no_h_or_d(ibr_run):
     _, doc, _ = ibr_run
     (u,) = doc["units"]
@@ -98,6 +100,7 @@ def test_ibr_plant_has_no_h_or_d(ibr_run):
     assert doc["summary"]["median_abs_H_error_percent"] is None
 
 
+@pytest.mark.slow
 def test_ibr_plant_page_shows_p_f_and_q_v(ibr_run):
     tmp, _, labels = ibr_run
     (axes,) = labels
@@ -114,6 +117,7 @@ def test_ibr_plant_page_shows_p_f_and_q_v(ibr_run):
     assert "B8_PV" in (tmp / "out" / "report.html").read_text()
 
 
+@pytest.mark.slow
 def test_validate_ranks_the_ibr_plant(tmp_path):
     """``jaxdse validate`` on the plant: ranked (not skipped); the line trip keeps |V| inside
     [Vdip, Vup], so REECA1's Kqv (the one default parameter without a plant controller) moves
@@ -156,6 +160,7 @@ def test_ibr_plant_not_played_back_is_not_judged(tmp_path, playback, electrical,
     assert (tmp_path / "out" / "units" / "B8_PV.html").exists()
 
 
+@pytest.mark.slow
 def test_ibr_validation_fails_a_planted_kqv(ibr_run, tmp_path):
     """The fault (0.1 s at |V| 0.38 pu, through REECA1's dip logic) with Kqv planted at 0.5
     instead of 2: the reactive current injected in the dip is a quarter of ANDES's, and the
@@ -175,6 +180,7 @@ def test_ibr_validation_fails_a_planted_kqv(ibr_run, tmp_path):
     assert u["playback_rms_percent_mbase"]["P_t"] < 1.0
 
 
+@pytest.mark.slow
 def test_ibr_plant_recorded_on_the_hv_side(ibr_run, tmp_path):
     """The line trip as a PMU on the HV side of bus 8's step-up transformer (bus 7 of the .raw,
     |V| 1.0225 pu) would record it (``transformer_to_hv``, the inverse of the fleet's mapping):

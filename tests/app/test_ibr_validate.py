@@ -83,6 +83,7 @@ def _found_again(factor: float, event: str):
     return decision
 
 
+@pytest.mark.slow
 def test_planted_kqv_is_found_again_on_the_fault():
     """Kqv x0.7 in the .dyr: the fault (|V| 0.56 pu, below Vdip) identifies it, the events
     reject the planted value and the filed one is within 10 % of ANDES's (fails with
@@ -92,6 +93,7 @@ def test_planted_kqv_is_found_again_on_the_fault():
     assert decision.cost_after.sum() < 0.1 * decision.cost_before.sum()
 
 
+@pytest.mark.slow
 def test_planted_kqv_above_is_found_again_on_the_shallow_dip():
     """Kqv x1.3 in the .dyr: on the shallower dip (|V| 0.74 pu, below Vdip) the injection stays
     inside Iqh1 for both values, so the dip identifies Kqv and the filed value is within 10 % of
@@ -99,6 +101,7 @@ def test_planted_kqv_above_is_found_again_on_the_shallow_dip():
     _found_again(1.3, "dip")
 
 
+@pytest.mark.slow
 def test_kqv_without_a_voltage_dip_is_left_with_its_reason():
     """The load step keeps |V| inside [Vdip, Vup]: Kqv does not move P or Q; it is not
     identifiable, and the sentence says why (validate then leaves it at its .dyr value). Two

@@ -100,6 +100,7 @@ def _record(bus, model="REGFMA1", **change) -> str:
     return f" {bus} '{model}' '1' {' '.join(f'{c[k]:g}' for k in jd.IBR_FIELDS[model])} /\n"
 
 
+@pytest.mark.slow
 def test_check_judges_its_steps_and_names_its_limits(tmp_path):
     """REGFM_A1 on bus 8 passes (held run, voltage step and frequency step judged; P answers +0.1
     Hz by -0.1/60/mp pu); bus 6's Pmax below its power flow is a data problem naming Pmax; bus 3
@@ -178,6 +179,7 @@ def _recording(path: Path) -> dict:
     return swing
 
 
+@pytest.mark.slow
 def test_fleet_fits_the_inertia_and_validates_the_playback(tmp_path):
     """REGFM_A1 with TPf planted 50 % high (H 1.5 s against 1 s): the fit's H interval covers the
     truth and excludes the record's value, mp within 2 %. REGFM_B1 with H planted 30 % high (2.6 s

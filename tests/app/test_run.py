@@ -112,6 +112,7 @@ def long_columns(ambient):
     return {k: v[:2600] for k, v in jd.phasor_columns(ambient.recording, spec).items()}
 
 
+@pytest.mark.slow
 def test_two_second_gap_splits_the_recording(tmp_path, long_columns, capsys):
     cols = {k: np.delete(v, np.s_[1250:1350]) for k, v in long_columns.items()}  # 2 s missing
     rc, err, s = run(tmp_path, cols, capsys=capsys)
@@ -214,6 +215,7 @@ def test_file_that_does_not_exist(tmp_path, capsys):
     assert rc == 2 and "pmu.csv" in line and "does not exist" in line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["csv_positive_sequence", "csv_three_phase", "comtrade"])
 def test_shipped_example_configs_run(tmp_path, name, capsys):
     shutil.copytree(ROOT / "examples", tmp_path / "examples")
@@ -228,6 +230,7 @@ def test_shipped_example_configs_run(tmp_path, name, capsys):
         assert (tmp_path / "o" / f"{fig}_{e['name']}.png").exists()
 
 
+@pytest.mark.slow
 def test_isone_config_estimates_all_three_generators(isone_run):
     """`jaxdse run examples/isone_mat.toml` (the session's run, conftest ``isone_run``;
     test_isone checks its numbers against the checked-in results)."""

@@ -33,12 +33,14 @@ def judge(line_trip, d_scale):
     return jd.window_scores(t, {"P_t": p_meas}, {"P_t": p}, {"P_t": 100.0}), smape
 
 
+@pytest.mark.slow
 def test_replay_with_the_true_damping_passes(line_trip):
     scores, smape = judge(line_trip, 1.0)
     assert scores.passed, scores.reasons
     assert smape < 2.0
 
 
+@pytest.mark.slow
 def test_replay_without_damping_rings_and_fails_despite_a_small_smape(line_trip):
     scores, smape = judge(line_trip, 0.0)
     assert smape < 5.0

@@ -3,6 +3,7 @@
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import jaxdse as jd
 from jaxdse._core import drem
@@ -59,6 +60,7 @@ def test_derivative_branch_sine_response():
     np.testing.assert_allclose(np.asarray(out)[late], expect[late], atol=1e-6)
 
 
+@pytest.mark.slow
 def test_noise_free_accuracy_with_true_tm(ambient, plant, estimate_jit):
     """Ambient excitation, true Tm, no noise: a2 within 1 %, x2 RMSE < 2 % of its std."""
     tr = ambient.truth
@@ -71,6 +73,7 @@ def test_noise_free_accuracy_with_true_tm(ambient, plant, estimate_jit):
     assert np.sqrt(np.mean(err**2)) < 0.02 * np.std(np.asarray(tr.x2_rad_s))
 
 
+@pytest.mark.slow
 def test_regression_identity_holds_on_truth(ambient, plant):
     """Zc = Delta * theta along a noise-free trajectory once filter transients have decayed."""
     tr = ambient.truth

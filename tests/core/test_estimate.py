@@ -14,6 +14,7 @@ def _finite(est):
                 est.trajectories.playback.x2_rad_s, est.trajectories.t_m_pu, est.trajectories.e_f_pu))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("event", [jd.Event(30.0, "load_step", 0.2), jd.Event(30.0, "line_trip", 3.0)])
 def test_stiff_events_stay_stable(plant, estimate_jit, event):
     """A 20 % load step or a line trip with gamma = 850: no NaN/inf, no divergence."""
@@ -26,6 +27,7 @@ def test_stiff_events_stay_stable(plant, estimate_jit, event):
     assert abs(float(est.a2 - sim.truth.a2)) / float(sim.truth.a2) < 0.1
 
 
+@pytest.mark.slow
 def test_no_excitation_is_flagged(plant, estimate_jit):
     sc = jd.Scenario(duration_s=60.0, ambient_load_std=0.0, ambient_freq_std_hz=0.0,
                      ambient_volt_std=0.0, tve_percent=0.0, freq_noise_hz=0.0)
@@ -38,6 +40,7 @@ def test_no_excitation_is_flagged(plant, estimate_jit):
     np.testing.assert_allclose(est.a2, jd.ObserverConfig().a2_init)  # untouched, not garbage
 
 
+@pytest.mark.slow
 def test_offline_generator_is_flagged(ambient, plant, estimate_jit):
     rec = ambient.recording
     rec = jd.Recording(t_s=rec.t_s, v_mag_pu=rec.v_mag_pu, v_ang_rad=rec.v_ang_rad,
@@ -47,6 +50,7 @@ def test_offline_generator_is_flagged(ambient, plant, estimate_jit):
     assert _finite(est) and not bool(est.online) and not bool(est.converged)
 
 
+@pytest.mark.slow
 def test_angle_offset_invariance(ambient, plant, estimate_jit):
     """+1e4 rad on every measured angle changes the estimates by < 1e-6 relative."""
     rec = ambient.recording
@@ -61,6 +65,7 @@ def test_angle_offset_invariance(ambient, plant, estimate_jit):
     assert float(jnp.max(jnp.abs(xa - xb))) <= 1e-6 * scale
 
 
+@pytest.mark.slow
 def test_frequency_from_voltage_angle(ambient, plant, estimate_jit):
     """Without a frequency channel, x2 is derived from the voltage angle and still estimates a2."""
     rec = ambient.clean
@@ -75,6 +80,7 @@ def test_frequency_from_voltage_angle(ambient, plant, estimate_jit):
 FAST = jd.Settings.fast()
 
 
+@pytest.mark.slow
 def test_vmap_over_configurations(short, plant, estimate_jit):
     gammas = jnp.linspace(200.0, 1600.0, 8)
     cfgs = jax.vmap(lambda g: jd.ObserverConfig(gamma1=g, gamma2=g))(gammas)
@@ -85,6 +91,7 @@ def test_vmap_over_configurations(short, plant, estimate_jit):
     assert len(np.unique(np.round(np.asarray(out.a2), 8))) == 8  # the gammas made a difference
 
 
+@pytest.mark.slow
 def test_vmap_over_generators(short, plant, estimate_jit):
     """Plants that differ in what the estimator reads (xq: the rotor angle; the governor droop:
     Tm): each member equals its own single run, and the members differ."""
@@ -101,6 +108,7 @@ def test_vmap_over_generators(short, plant, estimate_jit):
     assert abs(float(out.a2[0] - out.a2[2])) > 1e-3 * abs(float(out.a2[1]))
 
 
+@pytest.mark.slow
 def test_gradients_match_finite_differences(short, plant):
     """d loss / d(gamma, lambda, c, K, xq, R) vs central differences on 20 s, float64. The
     plant parameters are ones the estimator reads (xq: rotor angle; R: the governor's Tm)."""

@@ -45,6 +45,7 @@ def swing_signals(dt=0.002, n=20_000, seed=0):
     return jnp.stack([jnp.zeros(n), x[:, 0], torque, jnp.ones(n), gov]), dt
 
 
+@pytest.mark.slow
 def test_regression_recovers_known_parameters():
     signals, dt = swing_signals()
     disc = hold_discretisation(*lag_chain(jnp.array([3.0, 4.0, 5.0])), dt)
@@ -55,6 +56,7 @@ def test_regression_recovers_known_parameters():
         np.testing.assert_allclose(theta, [A1, A2, C, G], rtol=2e-4, atol=2e-5)
 
 
+@pytest.mark.slow
 def test_fused_normal_equations_equal_the_filtered_design():
     """The bootstrap's fused loop (filters and sums in one pass, draws innermost) gives the
     normal equations of ``_regression``'s design matrix, draw by draw, to round-off."""
@@ -72,6 +74,7 @@ def test_fused_normal_equations_equal_the_filtered_design():
         np.testing.assert_allclose(r[k], x.T @ (w * z), rtol=1e-11, atol=1e-14)
 
 
+@pytest.mark.slow
 def test_front_ends_share_one_front_end_with_the_bootstrap_draws(plant, short):
     """``front_ends`` runs the recording and its bootstrap draws through one vmapped front end:
     the recording's is the plain front end, each draw differs from it by noise of the measured
@@ -96,6 +99,7 @@ def test_front_ends_share_one_front_end_with_the_bootstrap_draws(plant, short):
                        plant, jd.ObserverConfig(), jd.Settings(), ids)
 
 
+@pytest.mark.slow
 def test_identify_on_a_noise_free_simulation_is_close(plant, ambient):
     """The whole identification on the project's own noise-free simulation: a2 within 1 %."""
     clean = ambient.clean
@@ -128,6 +132,7 @@ def test_the_governor_starts_near_its_periodic_state_under_an_oscillation(plant)
     assert max(ours) < 0.5 * max(rest), (max(ours), max(rest))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("event", [jd.Event(5.0, "load_step", 0.2), jd.Event(5.0, "frequency_drop", 0.05)])
 def test_the_governor_starts_at_rest_before_an_event(plant, event):
     """Before an event a constant speed leaves the governor at its equilibrium (noise-free truth
@@ -199,6 +204,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("reason", [r for r in CASES if r != "playback_diverged"])
 def test_every_verdict_bit(assessed, reason):
     base = verdict(assessed.estimate, assessed.identified, assessed.replay)
@@ -214,6 +220,7 @@ def test_every_verdict_bit(assessed, reason):
         assert int(v.governor_code) == 1
 
 
+@pytest.mark.slow
 def test_a_simplified_model_is_at_best_weakly_identified(assessed):
     """A plant whose estimator model was simplified by a fallback (q-axis circuits left out,
     constant torque; ``Plant.h_model_error``) is at best ``weakly identified`` unless H's
@@ -226,6 +233,7 @@ def test_a_simplified_model_is_at_best_weakly_identified(assessed):
     assert int(verdict(wide.estimate, wide.identified, wide.replay, VerdictSettings(), float("inf")).code) == 2
 
 
+@pytest.mark.slow
 def test_playback_diverged_and_drem_bits(assessed):
     a = eqx.tree_at(lambda x: x.replay.smape, assessed, assessed.replay.smape._replace(i_t=jnp.asarray(80.0)))
     v = verdict(a.estimate, a.identified, a.replay)

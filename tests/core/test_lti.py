@@ -91,6 +91,7 @@ def test_masked_median_is_exact(rng):
     assert float(masked_median(jnp.array([1.0, 2.0, 2.0, 2.0, 5.0]), jnp.ones(5, dtype=bool))) == 2.0
 
 
+@pytest.mark.slow
 def test_no_lapack_call_in_the_identification_graph(short, plant):
     """The per-unit identification holds no LAPACK custom call (they batch badly under vmap and
     once deadlocked XLA's CPU runtime)."""

@@ -126,6 +126,7 @@ def series_of(v, i):
         TS, np.abs(v), np.unwrap(np.angle(v)), i.real, i.imag)))
 
 
+@pytest.mark.slow
 def test_constant_voltage_plays_back_the_operating_point():
     unit = sexs_unit()
     vm, ang, p, q = 1.02, 0.2, 0.7, 0.25
@@ -319,6 +320,7 @@ def test_switching_step_round_trip():
         assert 100 * err / dev < SWITCH_TOL_PERCENT, (err, dev)
 
 
+@pytest.mark.slow
 def test_vmap_over_stacked_units_equals_single_calls(recording):
     _, series, _, _, _ = recording
     units = [sexs_unit(), sexs_unit(h_s=3.0, k=60.0), sexs_unit(h_s=5.5, r_pu=0.04)]
@@ -333,6 +335,7 @@ def test_vmap_over_stacked_units_equals_single_calls(recording):
         assert bool(batched.ok[k]) and bool(single.ok)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("where", ["v_mag_pu mid-recording", "i_re_pu in the first frames"])
 def test_nan_in_the_data_is_not_ok_and_does_not_raise(recording, where):
     unit, series, _, _, _ = recording
@@ -464,6 +467,7 @@ ESST4B = (0.0, 3.0495, 3.0495, 1.0, -1.0, 0.0, 1.0, 0.0, 1.0, -1.0, 0.0, 6.2751,
           0.0, 0.0)  # ACTIVSg2000 bus 1072's record
 
 
+@pytest.mark.slow
 def test_a_fault_plays_back_converged():
     """GENROU + ESST4B + IEEEST (ACTIVSg2000 bus 1072's records) under a 3-frame dip to 60 %: the
     stabiliser reaches its limit within a frame while the regulator's PI sits on its non-windup
@@ -487,6 +491,7 @@ def test_a_fault_plays_back_converged():
     np.testing.assert_allclose(r.efd_pu, ref.efd_pu, rtol=0, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_a_structure_beyond_one_call_plays_back_in_chunks(recording, monkeypatch):
     """``jaxdse fleet`` plays a model structure's units in calls of at most ``CHUNK_UNITS``
     (the last padded): three one-unit plants in chunks of two give each plant its own unit's

@@ -6,6 +6,7 @@ frame against 512)."""
 
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from jaxdse._dyr.ibr_unit import IbrUnit
 from jaxdse._dyr.playback import PlaybackSettings, TerminalSeries, play_back
@@ -37,6 +38,7 @@ def _fault():
     return TerminalSeries(*(jnp.asarray(a) for a in (t, vm, va, i0.real, i0.imag)))
 
 
+@pytest.mark.slow
 def test_the_fault_plays_back_at_the_fixed_step_and_converges():
     unit, series = _unit(), _fault()
     r = play_back(unit, series, PlaybackSettings())

@@ -122,6 +122,7 @@ def clean(pmu25, tmp_path_factory):
     return jd.phasor_columns(pmu25.recording, spec), Files(tmp_path_factory.mktemp("fuzz"))
 
 
+@pytest.mark.slow
 @settings(max_examples=100, deadline=None, derandomize=True, database=None, phases=PHASES,
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(d=damage)
@@ -145,6 +146,7 @@ def test_readers_end_in_an_error_or_noted_clean_segments(clean, d):
         assert noted(quality), f"damage {d} left no data_quality note"
 
 
+@pytest.mark.slow
 def test_estimator_runs_end_in_one_of_two_outcomes(clean):
     """Through `jaxdse run` (readers, estimator, identification, verdict): exit 2 with one
     line, or exit 0 with a finite H, the damage noted or flagged, and no silent wrong H."""

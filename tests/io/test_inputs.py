@@ -43,6 +43,7 @@ def read(path: Path, **spec):
 
 # --- unmapped columns ---------------------------------------------------------------------------
 
+@pytest.mark.slow
 def test_unmapped_text_columns_are_ignored_and_listed(tmp_path, cols):
     """A PMU STAT column of '0x0000' text and a status column of words, neither mapped: the run
     reads as without them and lists them (today's abort: "value 'OK' is not a number")."""

@@ -34,6 +34,7 @@ def short(pmu25):
     return pmu25
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("vu, cu, au, direction, tu", [
     ("kV_LL", "A", "deg", "out_of_plant", "s"),
     ("kV_LN", "kA", "rad", "into_plant", "ms"),

@@ -24,6 +24,7 @@ def pair(ambient, short):
     return [ambient.recording, short]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("settings", [FAST, FINAL], ids=["trajectories", "final"])
 def test_padded_batch_equals_single_runs(pair, plant, settings, estimate_jit):
     cfg = jd.ObserverConfig(gamma1=2000.0, gamma2=2000.0)
@@ -41,6 +42,7 @@ def test_padded_batch_equals_single_runs(pair, plant, settings, estimate_jit):
         np.testing.assert_allclose(got.a2_hat[:n], one.a2_hat, rtol=1e-9, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_final_mode_matches_trajectories(ambient, plant, estimate_jit):
     """keep="final" stores no trajectory but gives the same estimates and playback scores
     (convergence against the final estimate: the compiled shapes of the padded-batch test)."""
@@ -59,6 +61,7 @@ def test_final_mode_matches_trajectories(ambient, plant, estimate_jit):
     np.testing.assert_allclose(fin.a2_hat, traj.a2_hat[ends], rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_config_sweep_axis(ambient, plant, estimate_jit):
     """A stacked batch of configurations on one recording, in chunks with progress."""
     cfgs = [jd.ObserverConfig(gamma1=g, gamma2=g) for g in (500.0, 850.0, 1500.0, 3000.0, 6000.0)]

@@ -10,11 +10,13 @@ samples, two units, as its split-recording test).
 import os
 
 import numpy as np
+import pytest
 from builders import TEST_BOOTSTRAP_DRAWS
 
 import jaxdse as jd
 
 
+@pytest.mark.slow
 def test_runner_groups_pads_cuts_and_shifts(pmu25, cut25, plant, assess_jit):
     """Units of two lengths and two plants: each result is cut to its own length, shifted to
     its own start, and equals the unit assessed alone (padding is masked)."""
@@ -55,6 +57,7 @@ def test_compiler_options_follow_the_optimisation_setting():
         jax.config.update("jax_disable_most_optimizations", before)
 
 
+@pytest.mark.slow
 def test_chunks_on_the_thread_pool_equal_the_units_alone(cut25, plant, assess_jit):
     """Three units in chunks of two: the program compiles in the calling thread, the chunks
     run on the pool (with two or more cores; in the calling thread on one core); every unit

@@ -9,6 +9,7 @@ from jaxdse._many.batch import pad_recording
 FIELDS = ("t_s", "v_mag_pu", "v_ang_rad", "i_mag_pu", "i_ang_rad", "f_hz")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", ["fast", "adaptive-no-f-wrapped"])
 def test_stream_equals_one_shot(ambient, plant, case, estimate_jit):
     host = {k: np.asarray(getattr(ambient.recording, k))[:3100] for k in FIELDS}
@@ -36,6 +37,7 @@ def test_stream_equals_one_shot(ambient, plant, case, estimate_jit):
         assert bool(getattr(got, name)) == bool(getattr(one, name)), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("remainder", [1, 2, 3, 7])
 def test_stream_short_last_chunk(ambient, plant, remainder, estimate_jit):
     """4 chunks of 650 samples and 1 to 7 more: a last slice of fewer than 8 samples (5 of
@@ -68,6 +70,7 @@ def test_stream_short_last_chunk(ambient, plant, remainder, estimate_jit):
         assert bool(getattr(got, name)) == bool(getattr(one, name)), name
 
 
+@pytest.mark.slow
 def test_stream_rejects_short_chunks_and_trajectories(ambient, plant):
     with pytest.raises(ValueError, match="qss_window_s"):
         jd.estimate_stream(ambient.recording, plant, jd.ObserverConfig(), jd.Settings(keep="final"),

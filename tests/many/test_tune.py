@@ -53,6 +53,7 @@ def loss_at(batch, plant):
     return f, jnp.linspace(-0.2, 0.2, len(TUNABLE)), jax.jit(jax.value_and_grad(f))
 
 
+@pytest.mark.slow
 def test_loss_gradient_matches_finite_differences(loss_at):
     f, u0, vg = loss_at
     _, g = vg(u0)
@@ -63,6 +64,7 @@ def test_loss_gradient_matches_finite_differences(loss_at):
     assert float(jnp.max(jnp.abs(g))) > 0
 
 
+@pytest.mark.slow
 def test_forward_mode_gradient_equals_reverse_mode(loss_at, batch, plant):
     f, u0, vg = loss_at
     v_rev, g_rev = vg(u0)
@@ -77,6 +79,7 @@ def test_forward_mode_gradient_equals_reverse_mode(loss_at, batch, plant):
         jd.tune([batch], plant, autodiff="backward")
 
 
+@pytest.mark.slow
 def test_vmap_of_grad_equals_grad_per_member(loss_at):
     f, u0, vg = loss_at
     us = jnp.stack([u0, u0 + 0.1])
@@ -110,6 +113,7 @@ def _example(tmp_path, replace=()):
     return path
 
 
+@pytest.mark.slow
 def test_sweep_and_tune_commands(tmp_path, capsys, plant):
     cfg = _example(tmp_path)
     assert main(["sweep", str(cfg), "--out", str(tmp_path)]) == 0

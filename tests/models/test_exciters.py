@@ -256,6 +256,7 @@ LINEAR = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(LINEAR))
 @pytest.mark.parametrize("what", ["vref", "vs", "vt"])
 def test_small_step_matches_linear_response(name, what):

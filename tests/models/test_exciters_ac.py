@@ -523,6 +523,7 @@ def _loss(model, efd0, inputs):
             + model.efd(x, stepped, vref + 0.02))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(ZERO_T))
 def test_zero_time_constants_no_nan(name):
     model = ZERO_T[name]

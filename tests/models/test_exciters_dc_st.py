@@ -772,6 +772,7 @@ def _loss(model, efd0, inputs):
     return vref + jnp.sum(d) + jnp.sum(model.vector_field(x, stepped, vref)) + efd
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", list(ZERO_T) + ["ESST4B-record", "EXPIC1-record", "SCRX-record"])
 def test_zero_time_constants_no_nan(name):
     model = ZERO_T[name] if name in ZERO_T else STEADY[name]

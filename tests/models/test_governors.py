@@ -331,6 +331,7 @@ def _run_both(gov, kind, size, t_end):
     return tm, tm_ref, dw, tr
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls,name,kw", ALL, ids=IDS)
 @pytest.mark.parametrize("kind,size", SCENARIOS)
 def test_step_matches_block_diagram(cls, name, kw, kind, size):
@@ -451,6 +452,7 @@ def test_hygov_closed_gate_is_finite():
     assert np.all(np.isfinite(np.asarray(f))) and np.all(np.isfinite(np.asarray(g)))
 
 
+@pytest.mark.slow
 def test_ggov1_vmax_and_load_limiter():
     gov = GGOV1(ldref_pu=0.9, v_max_pu=1.0)
     tr0 = float(gov.reference_from_steady(T_M0, 0.0))

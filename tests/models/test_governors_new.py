@@ -200,6 +200,7 @@ def governors(draw, cls):
                   **pts)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [IEESGO, WSIEG1])
 @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())

@@ -292,6 +292,7 @@ def machines(draw, cls):
     return cls(**kw)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [GENROE, GENSAE, GENTPJ])
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
@@ -407,6 +408,7 @@ def test_invalid_constants_are_refused_in_one_line(cls, kw, message):
     assert "\n" not in str(e.value)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", list(MODELS))
 def test_gradients_are_finite(kind):
     vr, vi, ir, ii = phasors(*OP)

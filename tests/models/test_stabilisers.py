@@ -211,6 +211,7 @@ def _assert_rest(m, inp, selected):
             np.testing.assert_allclose(np.asarray(dx), 0.0, atol=1e-14)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("mode", range(1, 7))
 def test_ieeest_rest_state_every_mode(mode):
     for params in (IEEEST_FULL, IEEEST_CASES["wecc240 record"], IEEEST_CASES["A2 = A4 = 0"]):

@@ -209,6 +209,7 @@ def pss_params(draw, cls):
     return cls(**p)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [PSS2A, PSS2B])
 @settings(max_examples=10, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
@@ -311,6 +312,7 @@ ZERO_T = dict(m_rtf=5, n_rtf=1, tw1_s=0.0, tw2_s=0.0, t6_s=0.0, tw3_s=0.0, tw4_s
               t3_s=0.0, t4_s=0.0, vst_max_pu=0.1, vst_min_pu=-0.1)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("cls", [PSS2A, PSS2B])
 def test_zero_time_constants_give_finite_values_and_gradients(cls):
     kw = dict(ZERO_T, **({"t10_s": 0.0, "t11_s": 0.0} if cls is PSS2B else {}))

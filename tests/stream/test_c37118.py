@@ -532,6 +532,7 @@ def test_fuzz_random_bytes(raw):
     assert len(dec.buf) <= len(raw)
 
 
+@pytest.mark.slow
 @FUZZ
 @given(st.integers(0, 7), st.integers(0, 15), st.integers(0, 0xFFFF), st.binary(max_size=600))
 def test_fuzz_random_bodies_with_a_valid_crc(ftype, version, idcode, body):

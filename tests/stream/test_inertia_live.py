@@ -59,6 +59,7 @@ def run_config(tmp_path_factory):
     return example_cut(tmp_path_factory.mktemp("inertia_live"), 3000)
 
 
+@pytest.mark.slow
 def test_monitor_writes_inertia_lines_and_survives_a_dropped_unit(run_config, tmp_path):
     """Two stations (``tile = 2``: the example's unit, 1100 MVA, H 6.18 s, twice), read as
     two streams of one unit each from one server (the shapes of test_monitor.py's

@@ -64,6 +64,7 @@ def _feed(g, rec, window, usable=None):
     return out
 
 
+@pytest.mark.slow
 def test_windowed_estimate_is_right_and_covers(example, monkeypatch):
     """H right and covered once the window is full; while it fills, the chunks only push their
     blocks (the segment's first call all the blocks its slice holds), with no window estimate."""
@@ -91,6 +92,7 @@ def test_windowed_estimate_is_right_and_covers(example, monkeypatch):
         assert u.age_s == 0.0 and u.segment == 1
 
 
+@pytest.mark.slow
 def test_chunks_do_not_change_h(example):
     """The same samples in chunks of 1 s or 2 s: the same sums, so the same H (the front end's
     context, the filters, the governor and its low-pass carry exactly across chunks; a
@@ -124,6 +126,7 @@ def test_filling_says_how_far_along_and_what_for(example):
     assert "a full 20 s window and the 1 s after it" in grp.wait_reason()
 
 
+@pytest.mark.slow
 def test_short_gaps_are_bridged_long_ones_restart(example):
     _, g, rec = example
     rec = _head(rec, 1750)                                     # 70 s
@@ -154,6 +157,7 @@ def _pair_with_a_restart(example, monkeypatch):
     return g, rec, WindowSettings(update_s=1.0, window_s=20.0), usable
 
 
+@pytest.mark.slow
 def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, monkeypatch):
     """A unit restarted by a long gap runs its chunks while the others wait for theirs: those
     chunks run on the group's small batch (its rows gathered, the results scattered back), and
@@ -189,6 +193,7 @@ def test_few_ready_units_run_on_the_small_batch_with_the_same_result(example, mo
             assert u.d_pu_s == pytest.approx(w.d_pu_s, rel=1e-10)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("every", [4, None])
 def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkeypatch, every):
     """With ``defer`` (the live monitor), a start and a unit restarted while another serves are
@@ -230,6 +235,7 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
             assert late and max(late) > 0 and max(late) <= 50 + 1
 
 
+@pytest.mark.slow
 def test_monitor_end_to_end_and_replay_equality(example, tmp_path):
     config, _, _ = example
     source = load_source(config)
@@ -332,6 +338,7 @@ def test_unreachable_stream_ends_cleanly(example, tmp_path):
     assert math.isfinite(summary["wall_s"])
 
 
+@pytest.mark.slow
 def test_results_are_published_and_shown(example, tmp_path):
     """The virtual PMU: a C37.118 client reads CFG-2 (one station per unit, analogs H, H_LO,
     H_HI, D, AGE) and data frames whose analogs are the updates' values. The live view: its
@@ -386,6 +393,7 @@ def test_results_are_published_and_shown(example, tmp_path):
         assert st.analogs[1] == pytest.approx(x["H_ci95"][0], rel=1e-6)
 
 
+@pytest.mark.slow
 def test_one_streams_failure_costs_its_units_only(example, tmp_path):
     """Two streams (``tile = 2``: units unit1 and unit1~2, one per stream); the second stops
     after 2 s: its unit's updates stop and its thread keeps trying, the first's unit goes on.

@@ -206,6 +206,7 @@ def test_fault_and_format_words():
         pmu_sim.Format.parse("double")
 
 
+@pytest.mark.slow
 def test_command_line_serves_and_ends_by_itself(recording):
     proc = subprocess.Popen(
         [

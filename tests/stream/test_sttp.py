@@ -210,6 +210,7 @@ def _subscribe(host, port, expression, got, errors):
     return sub
 
 
+@pytest.mark.slow
 def test_monitor_reads_and_publishes_sttp(sttp_lib, example, tmp_path, monkeypatch):
     """The example served over STTP at 20x; the monitor reads it (STTP in) and publishes its
     updates (STTP out); a subscriber of the published point tags gets updates.jsonl's values.

@@ -50,6 +50,7 @@ def _stale(rec, k=4):
                                f_hz=f(rec.f_hz))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stale", [False, True])
 def test_a_window_over_the_recording_gives_the_batch_h(hydro, stale):
     """The batch fit starts its filters and governor model at the first full derivative window,
@@ -74,6 +75,7 @@ def test_a_window_over_the_recording_gives_the_batch_h(hydro, stale):
     assert float(batch.h_s) == pytest.approx(ups[0].h_s, rel=2.5e-3)
 
 
+@pytest.mark.slow
 def test_a_segments_first_slice_gives_its_chunks_blocks_in_one_pass(hydro, monkeypatch):
     """The first slice of a segment (T_ref's 30 s) holds 14 chunks of 2 s: one call gives their
     blocks and carry as 14 calls of one chunk each do, and the group makes that call alone, with
