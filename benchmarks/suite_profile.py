@@ -19,6 +19,7 @@ more, which the quick run should not hold) and prints the totals and the 15 long
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import platform
@@ -127,10 +128,12 @@ def run(tier: str, paths: list[str]) -> dict:
 
 
 def main(argv: list[str]) -> int:
-    tiers = list(TIERS)
-    if argv[:1] == ["--tier"]:
-        tiers, argv = [argv[1]] if argv[1] != "both" else tiers, argv[2:]
-    paths = argv or ["tests"]
+    ap = argparse.ArgumentParser(description="Where the test suite's time goes, per test file and tier.")
+    ap.add_argument("--tier", choices=[*TIERS, "both"], default="both",
+                    help="quick: README's test command; all: every test (-m ''); both (default)")
+    ap.add_argument("paths", nargs="*", default=["tests"], help="test folders or files (default: tests)")
+    args = ap.parse_args(argv)
+    tiers, paths = (list(TIERS) if args.tier == "both" else [args.tier]), args.paths
     results = HERE / "suite_profile.json"
     old = json.loads(results.read_text()) if results.exists() else {}
     out = {"machine": f"{platform.machine()}, {os.cpu_count()} cores", "slow_s": SLOW_S,
