@@ -44,11 +44,11 @@ CALIBRATION_SCENARIO = "line_trip"
 
 def plant(m: dict, f0: float) -> jd.Plant:
     """The jaxdse plant of one bench machine (machine base; H from the truth only as a placeholder:
-    the estimator never reads it)."""
+    the estimator never reads it). The q-axis circuits carry the record's saturation."""
     g = m["genrou_mbase"]
     machine = jd.Machine(
         q_axis=jd.QAxisCircuits(xq1_pu=g["xq1"], xq2_pu=g["xq2"], xl_pu=g["xl"], tq01_s=g["Tq10"],
-                                tq02_s=g["Tq20"]),
+                                tq02_s=g["Tq20"], s10=g["S10"], s12=g["S12"]),
         xd_pu=g["xd"], xq_pu=g["xq"], xd1_pu=g["xd1"], rs_pu=g["ra"], td01_s=g["Td10"],
         s_rated_mva=m["mbase_mva"], v_rated_kv=m["bus_kv"], f_nominal_hz=f0)
     p = m["governor"]["params_mbase_psse_order"]

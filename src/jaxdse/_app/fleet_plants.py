@@ -255,9 +255,17 @@ def generator_run(name, bus, units: list[UnitData], spec, raw: RawCase,
         def tavg(k):
             return float(sum(wi * getattr(td, k) for wi, td in zip(w, tds)))
 
+        # The observer's q-axis saturation is GENROU's (quadratic) or GENROE's (exponential) on
+        # |psi''|; GENTPJ's has another form, and a plant mixing the curves gets none.
+        models = {u.machine.model for u in units}
+        sat = ({"s10": tavg("s10"), "s12": tavg("s12"), "exponential": models == {"GENROE"}}
+               if models in ({"GENROU"}, {"GENROE"}) else {})
+        if models - {"GENTPJ"} and not sat:
+            notes.append(f"plant {name}: its machines mix {'/'.join(sorted(models))}: the observer's "
+                         "q-axis circuits left unsaturated")
         try:
             q_axis = QAxisCircuits(xq1_pu=tavg("xq1_pu"), xq2_pu=tavg("xd2_pu"), xl_pu=tavg("xl_pu"),
-                                   tq01_s=tavg("tq01_s"), tq02_s=tavg("tq02_s"))
+                                   tq01_s=tavg("tq01_s"), tq02_s=tavg("tq02_s"), **sat)
         except ValueError as e:
             why = record_message(_line(e), "MBASE-weighted GENROU/GENTPJ", Q_AXIS_CONS)
             notes.append(f"plant {name}: {why}: q-axis circuits left out (transient model)")
@@ -313,7 +321,8 @@ def _p_max(units: list[UnitData], governor, s_mva: float) -> dict:
     return {"p_max_mw": p_max, "p_max_source": source}
 
 
-Q_AXIS_CONS = {"xq1_pu": "X'q", "xq2_pu": "X''d", "xl_pu": "Xl", "tq01_s": "T'qo", "tq02_s": "T''qo"}
+Q_AXIS_CONS = {"xq1_pu": "X'q", "xq2_pu": "X''d", "xl_pu": "Xl", "tq01_s": "T'qo", "tq02_s": "T''qo",
+               "s10": "S(1.0)", "s12": "S(1.2)"}
 """The fields of the estimator's q-axis circuits -> the machine records' CONs they average."""
 
 

@@ -20,7 +20,20 @@ from .plant import Plant
 from .playback import PlaybackInputs, estimate_field_voltage
 from .recording import Recording
 from .settings import Settings
-from .signals import frequency_from_angle, measured_speed_deviation, unwrap_continuing
+from .signals import (
+    angle_jumps,
+    bridge,
+    frequency_from_angle,
+    jumps,
+    measured_speed_deviation,
+    unwrap_continuing,
+)
+
+PHASE_JUMP_RATIO, PHASE_JUMP_FACTOR = 4.0, 10.0
+"""A jump of the measured voltage phasor (:func:`~jaxdse._core.signals.jumps`: over this many
+times the curvature around it and times the median second difference) is a switching."""
+PHASE_JUMP_GUARD = 2
+"""Samples on each side of a switching over which the frequency channel is bridged."""
 
 
 class StreamContext(NamedTuple):
@@ -37,6 +50,8 @@ class StreamContext(NamedTuple):
     """Unwrapped terminal-voltage angle at the first sample."""
     q_state0: Array | None = None
     """q-axis rotor states at the first sample (``Machine.q_axis`` only)."""
+    theta_jump0: Array | float = 0.0
+    """The voltage angle's switching jumps before the first sample, summed [rad]."""
 
 
 class FrontEnd(NamedTuple):
@@ -58,7 +73,10 @@ class FrontEnd(NamedTuple):
     x2_meas: Array
     """Measured speed deviation [rad/s] (paper Remark 2)."""
     f_hz: Array
-    """Frequency of the measured bus [Hz]: the channel, or derived from its voltage angle."""
+    """Frequency of the measured bus [Hz]: the channel, or derived from its voltage angle;
+    bridged across switchings."""
+    theta_smooth: Array
+    """theta_ref less its jumps at switchings [rad]: the angle whose rate 2 pi (f - f0) is."""
     dw: Array
     """x2_meas / w_s [pu], the governor input."""
 
@@ -89,15 +107,23 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     mapped = map_to_terminal(v_meas, i_meas, plant.line, plant.transformer, plant.aux,
                              recording.location, ctx.p_lv_sum, ctx.p_lv_count)
     i_t = mapped.i_sg * plant.current_scale
-    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0, q_disc)
-    f_hz = frequency_from_angle(theta_ref, dt, m.f_nominal_hz, hw, n)
+    # Switchings: jumps of the measured voltage phasor. The rotor angle stays continuous, but
+    # the bus angle jumps and a PMU's frequency spikes (a ramp in Remark 2's two terms, whose
+    # areas need not cancel): x2 takes the angle less its jumps and the bridged channel. The
+    # observer's q-axis circuits hold the new values over such an interval.
+    switched = jumps(recording.v_mag_pu * jnp.exp(1j * theta_ref), PHASE_JUMP_RATIO, PHASE_JUMP_FACTOR)
+    switched = switched & (jnp.arange(switched.shape[0]) < n - 1)
+    theta_smooth = theta_ref - ctx.theta_jump0 - angle_jumps(theta_ref, switched)
+    alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0, q_disc, switched)
+    f_hz = frequency_from_angle(theta_smooth, dt, m.f_nominal_hz, hw, n)
     if recording.f_hz is not None:  # the channel where it has a value, else the derived one
-        f_hz = jnp.where(jnp.isnan(recording.f_hz), f_hz, recording.f_hz)
-    x2_meas = measured_speed_deviation(f_hz, alg.delta_rad, theta_ref, dt, m.f_nominal_hz, hw, n)
+        f_hz = bridge(jnp.where(jnp.isnan(recording.f_hz), f_hz, recording.f_hz), switched, PHASE_JUMP_GUARD)
+    x2_meas = measured_speed_deviation(f_hz, alg.delta_rad, theta_smooth, dt, m.f_nominal_hz, hw, n)
     theta_t = theta_ref + unwrap_continuing(jnp.angle(mapped.v_t), None if context is None
                                             else ctx.theta_t0 - theta_ref[0])
     return FrontEnd(n=n, valid=jnp.arange(ts.shape[0]) < n, theta_ref=theta_ref, theta_t=theta_t,
                     v_t=mapped.v_t, i_t=i_t, p_lv=mapped.p_lv, alg=alg, x2_meas=x2_meas, f_hz=f_hz,
+                    theta_smooth=theta_smooth,
                     dw=x2_meas / m.omega_s)
 
 
@@ -108,7 +134,8 @@ def next_context(fe: FrontEnd, ctx: StreamContext | None, at) -> StreamContext:
     p_sum, p_count = (0.0, 0) if ctx is None else (ctx.p_lv_sum, ctx.p_lv_count)
     return StreamContext(p_sum + jnp.sum(jnp.where(before, fe.p_lv, 0.0)), p_count + at,
                          fe.theta_ref[at], (fe.alg.delta_rad - fe.theta_ref)[at], fe.theta_t[at],
-                         None if fe.alg.q_state is None else fe.alg.q_state[at])
+                         None if fe.alg.q_state is None else fe.alg.q_state[at],
+                         (fe.theta_ref - fe.theta_smooth)[at])
 
 
 def reference_torque(ts, fe: FrontEnd, gov: AbstractGovernor, settings: Settings):

@@ -348,7 +348,9 @@ def governor_input(fe: FrontEnd, plant: Plant, smoothing, lead: int):
 
 def _signals(fe: FrontEnd, dw, recording: Recording, plant: Plant, t_ref, dt, lead: int, quiet):
     """The unfiltered inputs of the regression: 2 pi (f - f0), delta - theta, Tm - Te, 1,
-    Tm - Tm(0); and Tm(0) [pu]. The governor model, driven by ``dw`` (:func:`governor_input`),
+    Tm - Tm(0); and Tm(0) [pu]. theta is the bus angle less its jumps at switchings, and f
+    the channel bridged across them (``FrontEnd.theta_smooth``): the pair's Remark-2 sum would
+    otherwise carry the channel's spike there. The governor model, driven by ``dw`` (:func:`governor_input`),
     starts at :func:`governor_start` over the recording's ``quiet`` samples after ``lead``.
 
     Without a frequency channel, f would be the smoothed derivative of theta: then the bus
@@ -371,7 +373,7 @@ def _signals(fe: FrontEnd, dw, recording: Recording, plant: Plant, t_ref, dt, le
     t_m = held(jnp.pad(governor_torque(plant.governor, dw[lead_:], dt, t_ref, x0), (lead_, 0)))
     derived = True if recording.f_hz is None else jnp.all(jnp.isnan(recording.f_hz) | ~fe.valid)
     bus = jnp.where(derived, 0.0, 2.0 * jnp.pi * (held(fe.f_hz) - plant.machine.f_nominal_hz))
-    rotor = held(jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_ref))
+    rotor = held(jnp.where(derived, fe.alg.delta_rad, fe.alg.delta_rad - fe.theta_smooth))
     one = jnp.ones_like(bus)
     return jnp.stack([bus, rotor, t_m - held(fe.alg.t_e_pu), one, t_m - t_m[0]]), t_m[0]
 

@@ -28,6 +28,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._base.fields import as_float, check_nonnegative, check_positive, concrete
+from .._models.machines import exponential_saturation, saturation, saturation_coefficients
 
 
 class QAxisCircuits(eqx.Module):
@@ -37,11 +38,15 @@ class QAxisCircuits(eqx.Module):
     instant. A real round-rotor machine has a q-axis field-and-damper pair (transient X'q,
     T'q0; subtransient X''q, T''q0): during a swing the flux they hold lags the q-axis current,
     and that angle is off the rotor angle by arcsin(psi_d / |psi|), with psi_d = E''d -
-    (xq - X''q) Iq (zero in steady state). Given these data (the GENROU record of a .dyr),
-    :func:`jaxdse.algebraic_observer` integrates the PSS/E GENROU q-axis equations driven by
-    the observed Iq and removes that lag. On GENROU recordings of an independent simulator it
-    cuts the rotor-angle error by a factor of 10-100 (``experiments/andes_bench``).
-    Saturation of the q axis is not modelled.
+    (xq - X''q) Iq (zero in steady state without saturation). Given these data (the GENROU
+    record of a .dyr), :func:`jaxdse.algebraic_observer` integrates the PSS/E GENROU q-axis
+    equations driven by the observed Iq and removes that lag. On GENROU recordings of an
+    independent simulator it cuts the rotor-angle error by a factor of 10-100
+    (``experiments/andes_bench``).
+
+    Saturation as in GENROU (GENROE: ``exponential``): S(|psi''|) adds S kq psi''q to the q-axis
+    field current, kq = (xq - Xl)/(xd - Xl); |psi''| = |V + (Rs + j X'') I| is measured. With
+    ``s10 = 0`` there is none (GENTPJ, whose saturation has another form, is used so).
     """
 
     xq1_pu: Float[Array, ""] = eqx.field(converter=as_float)
@@ -54,10 +59,16 @@ class QAxisCircuits(eqx.Module):
     """q-axis transient open-circuit time constant T'q0 [s]."""
     tq02_s: Float[Array, ""] = eqx.field(converter=as_float)
     """q-axis subtransient open-circuit time constant T''q0 [s]."""
+    s10: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.0) of the machine record [pu]."""
+    s12: Float[Array, ""] = eqx.field(converter=as_float, default=0.0)
+    """Saturation S(1.2) of the machine record [pu]."""
+    exponential: bool = eqx.field(static=True, default=False)
+    """The saturation curve: PSS/E's quadratic B (x - A)^2 / x (GENROU) or B x^A (GENROE)."""
 
     def __check_init__(self):
         check_positive(self, "xq1_pu", "xq2_pu", "tq01_s", "tq02_s")
-        check_nonnegative(self, "xl_pu")
+        check_nonnegative(self, "xl_pu", "s10", "s12")
         # Used as given wherever the equations can be evaluated: they divide by X'q - Xl only.
         # X''q below Xl (shipped cases have it; PSS/E warns and simulates it) or above X'q is
         # odd data, not a reason to drop the circuits (``jaxdse._io.psse.machine_warnings``).
@@ -75,6 +86,17 @@ class QAxisCircuits(eqx.Module):
         b = jnp.stack([(xq - x1) * (1.0 - k * (x1 - xl)) / t1, (x1 - xl) / t2])
         c = jnp.stack([(x2 - xl) / (x1 - xl), (x1 - x2) / (x1 - xl)])
         return a, b, c
+
+    def saturation_input(self, xq, xd):
+        """B_s: the saturation's term B_s S(|psi''|) E''d in d[E'd, psi'q]/dt (PSS/E GENROU)."""
+        kq = (xq - self.xl_pu) / (xd - self.xl_pu)
+        return jnp.stack([-kq / self.tq01_s, jnp.zeros_like(kq)])
+
+    def saturation(self, psi2_mag):
+        """S(|psi''|) of the record (0 where s10 = 0)."""
+        if self.exponential:
+            return exponential_saturation(psi2_mag, self.s10, self.s12)
+        return saturation(psi2_mag, *saturation_coefficients(self.s10, self.s12))
 
 
 class Machine(eqx.Module):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 
 
@@ -53,6 +54,34 @@ def measured_speed_deviation(f_hz, delta, theta, dt, f_nominal_hz, half_width: i
     in the same frame.
     """
     return 2.0 * jnp.pi * (f_hz - f_nominal_hz) + smooth_derivative(delta - theta, dt, half_width, n)
+
+
+def angle_jumps(theta, switched):
+    """The jumps of an angle at its switchings, summed [rad] per sample: ``theta`` less them is
+    continuous. ``switched`` (per sample interval, :func:`jumps`): the jump of an interval is
+    its increment less the mean of the increments two intervals before and after it (a
+    transition over two frames leaves its neighbour's increment out)."""
+    inc = jnp.diff(theta)
+    k = jnp.arange(inc.shape[0])
+    smooth = (inc[jnp.maximum(k - 2, 0)] + inc[jnp.minimum(k + 2, inc.shape[0] - 1)]) / 2
+    return jnp.concatenate([jnp.zeros(1, theta.dtype), jnp.cumsum(jnp.where(switched, inc - smooth, 0.0))])
+
+
+def bridge(x, switched, reach: int):
+    """``x`` interpolated linearly across the samples within ``reach`` of a switching
+    (``switched`` per sample interval, :func:`jumps`; the samples k - reach to k + 1 + reach of
+    the interval from k to k + 1); unchanged elsewhere. A PMU's frequency spikes where the
+    angle it is derived from jumps."""
+    size = x.shape[0]
+    idx = jnp.arange(size)
+    count = jnp.concatenate([jnp.zeros(1, jnp.int32), jnp.cumsum(switched.astype(jnp.int32))])
+    guarded = (count[jnp.minimum(idx + reach + 1, size - 1)] - count[jnp.maximum(idx - reach - 1, 0)]) > 0
+    before = jax.lax.cummax(jnp.where(guarded, -1, idx))
+    after = jax.lax.cummin(jnp.where(guarded, size, idx), reverse=True)
+    x_b, x_a = x[jnp.clip(before, 0, size - 1)], x[jnp.clip(after, 0, size - 1)]
+    w = (idx - before) / jnp.maximum(after - before, 1)
+    inside = jnp.where(before < 0, x_a, jnp.where(after >= size, x_b, x_b + w * (x_a - x_b)))
+    return jnp.where(guarded & ((before >= 0) | (after < size)), inside, x)
 
 
 def jumps(x, ratio, factor):

@@ -199,7 +199,7 @@ def window_chunk(rec: Recording, plant: Plant, config: ObserverConfig, settings:
     discs = _filters(config, s, dt)
     derived = rec.f_hz is None
     bus_all = jnp.zeros_like(ts) if derived else 2.0 * jnp.pi * (fe.f_hz - m.f_nominal_hz)
-    rotor_all = fe.alg.delta_rad if derived else fe.alg.delta_rad - fe.theta_ref
+    rotor_all = fe.alg.delta_rad if derived else fe.alg.delta_rad - fe.theta_smooth
     if carry is None:   # at rest at the segment's first own sample
         t_ref = reference_torque(ts, fe, gov, settings)   # the batch fit's, as far as the slice goes
         dw_start = governor_input(fe, plant, smoothing, lead)   # the batch fit's, over the slice

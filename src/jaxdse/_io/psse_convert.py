@@ -44,6 +44,10 @@ class MachineTransientData:
     """T''qo."""
     xl_pu: float
     """Xl, stator leakage."""
+    s10: float = 0.0
+    """S(1.0) of the record."""
+    s12: float = 0.0
+    """S(1.2) of the record."""
 
 
 ROUND_ROTOR = ("GENROU", "GENROE", "GENTPJ")
@@ -101,7 +105,8 @@ def transient_data(gen_dyr_record: DyrRecord) -> MachineTransientData | None:
     salient = rec.model in SALIENT_POLE
     return MachineTransientData(model=rec.model, xq1_pu=None if salient else p["X'q"],
                                 tq01_s=None if salient else p["T'qo"], xd2_pu=p["X''d"],
-                                td02_s=p["T''do"], tq02_s=p["T''qo"], xl_pu=p["Xl"])
+                                td02_s=p["T''do"], tq02_s=p["T''qo"], xl_pu=p["Xl"],
+                                s10=p["S(1.0)"], s12=p["S(1.2)"])
 
 
 def _g(x) -> str:
