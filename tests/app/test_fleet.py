@@ -79,11 +79,10 @@ def test_fleet_json_and_report(ieee14):
         # plant data outside the typical range (ieee14's X'd = 0.6), used as given and said so
         assert any("X'd = 0.6 pu is outside the typical" in w for w in u["data_warnings"])
         assert u["parameters"]["H"]["verdict"] == u["verdict"]
-    # No false green: B1_G1 comes out 14 % high with D < 0 (the 3rd-order model against GENROU
-    # through a line trip); its filter spread keeps it from `identified`.
-    worst = {u["name"]: u for u in doc["units"]}["B1_G1"]
-    assert worst["H_error_percent"] > 10 and worst["verdict"] != "identified", worst["reasons"]
-    assert "interval_wide" in worst["reasons"] and worst["interval"]["filter_refits_counted"] == 2
+    # No false green: every `identified` unit within 10 %. B1_G1 came out 14 % high before the
+    # bus angle's jump at the trip was taken out of the measured speed; now within 2 %.
+    assert all(abs(u["H_error_percent"]) <= 10 for u in doc["units"] if u["verdict"] == "identified")
+    assert abs({u["name"]: u for u in doc["units"]}["B1_G1"]["H_error_percent"]) < 2
     assert all(u["verdict"] != "identified" for u in doc["units"] if abs(u["H_error_percent"]) > 10)
     assert doc["case"]["dyr_models_not_used"] == ["ESST3A", "EXST1"]
     assert all(i["sha256"] for i in doc["inputs"])

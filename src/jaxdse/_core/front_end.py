@@ -111,7 +111,7 @@ def front_end(recording: Recording, plant: Plant, settings: Settings = Settings(
     # the bus angle jumps and a PMU's frequency spikes (a ramp in Remark 2's two terms, whose
     # areas need not cancel): x2 takes the angle less its jumps and the bridged channel. The
     # observer's q-axis circuits hold the new values over such an interval.
-    switched = jumps(recording.v_mag_pu * jnp.exp(1j * theta_ref), PHASE_JUMP_RATIO, PHASE_JUMP_FACTOR)
+    switched = jumps(recording.v_mag_pu * jnp.exp(1j * theta_ref), PHASE_JUMP_RATIO, PHASE_JUMP_FACTOR, n)
     switched = switched & (jnp.arange(switched.shape[0]) < n - 1)
     theta_smooth = theta_ref - ctx.theta_jump0 - angle_jumps(theta_ref, switched)
     alg = algebraic_observer(mapped.v_t, i_t, theta_ref, m, ctx.rel0, dt, ctx.q_state0, q_disc, switched)

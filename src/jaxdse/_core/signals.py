@@ -84,7 +84,7 @@ def bridge(x, switched, reach: int):
     return jnp.where(guarded & ((before >= 0) | (after < size)), inside, x)
 
 
-def jumps(x, ratio, factor):
+def jumps(x, ratio, factor, n=None):
     """Per sample interval: True where ``x`` (real or complex) jumps between two samples (a
     switching event). A jump J between samples k and k+1 puts +J and -J into the second
     differences d2 = x(j+1) - 2 x(j) + x(j-1) at samples k and k+1; the jump |d2(k) - d2(k+1)| / 2
@@ -93,10 +93,13 @@ def jumps(x, ratio, factor):
     noise). Second differences, not first: a steady frequency offset turns a phasor by the same
     angle each frame, and after a large event the phasor rotates fast while it jumps."""
     d2 = jnp.diff(x, 2)
+    if n is not None:  # padded at the end: as if x had n samples
+        d2 = jnp.where(jnp.arange(d2.shape[0]) < n - 2, d2, 0.0)
     p = jnp.pad(d2, 2)  # p[k + 1]: d2 at sample k (0 at the ends)
     k = jnp.arange(x.shape[0] - 1)
     a, b = p[k + 1], p[k + 2]
     jump = jnp.abs(a - b) / 2
     smooth = jnp.maximum(jnp.maximum(jnp.abs(p[k]), jnp.abs(p[k + 3])), jnp.abs(a + b) / 2)
-    noise = jnp.median(jnp.abs(d2))
+    noise = (jnp.median(jnp.abs(d2)) if n is None else
+             jnp.nanmedian(jnp.where(jnp.arange(d2.shape[0]) < n - 2, jnp.abs(d2), jnp.nan)))
     return (jump > ratio * smooth) & (jump > factor * noise)
