@@ -1,5 +1,6 @@
 import functools
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -65,8 +66,8 @@ ROU = dict(td0_1_s=6.5, td0_2_s=0.06, tq0_1_s=0.2, tq0_2_s=0.05, h_s=4.0, d_pu=0
 
 
 @functools.cache
-def _genrou_run(jump_rad: float):
-    """The 3 s run of :func:`_genrou_swing` at every integration step (one compiled program)."""
+def _genrou_run(jump_rad: float, seconds: float):
+    """The run of :func:`_genrou_swing` at every integration step (one compiled program)."""
     from jaxdse._models.machines import GENROU
 
     g = GENROU(**ROU)
@@ -91,17 +92,17 @@ def _genrou_run(jump_rad: float):
             out = g.terminal(y, v.real, v.imag)
             return y2, (y[4], v, out.i_re_pu + 1j * out.i_im_pu, y[5])
 
-        return jax.lax.scan(step, y0, jnp.arange(3 * 4800))[1]
+        return jax.lax.scan(step, y0, jnp.arange(round(seconds * 4800)))[1]
 
     return tuple(np.asarray(x) for x in run(st.state, jump_rad))
 
 
-def _genrou_swing(fps: int, jump_rad: float, with_speed: bool = False):
+def _genrou_swing(fps: int, jump_rad: float, with_speed: bool = False, seconds: float = 3.0):
     """A saturated GENROU (the ieee14 bus-1 record) on a bus whose voltage turns by ``jump_rad``
-    at t = 1 s, 1 s after a +0.1 pu torque step: RK4 at 1/4800 s, sampled at ``fps`` (the
+    at t = 1 s, 1 s after a +0.1 pu torque step, for ``seconds``: RK4 at 1/4800 s, sampled at ``fps`` (the
     sample at the jump holds the value before it, as simulators record it). Returns (t, V, I, delta)
     and, ``with_speed``, a PMU frequency f [Hz] and the rotor speed omega [pu]."""
-    delta, v, i, omega = _genrou_run(float(jump_rad))
+    delta, v, i, omega = _genrou_run(float(jump_rad), float(seconds))
     n = delta.shape[0]
     k = np.arange(0, n, 4800 // fps)
     t = k / 4800
@@ -116,8 +117,13 @@ def _genrou_swing(fps: int, jump_rad: float, with_speed: bool = False):
 def _observed_delta(v, i, dt, q_axis):
     m = jd.Machine(xd_pu=ROU["xd_pu"], xq_pu=ROU["xq_pu"], xd1_pu=ROU["xd1_pu"], rs_pu=0.0,
                    td01_s=ROU["td0_1_s"], q_axis=q_axis)
-    out = algebraic_observer(jnp.asarray(v), jnp.asarray(i), jnp.zeros(len(v)), m, dt=dt)
-    return np.asarray(out.delta_rad)
+    return np.asarray(_observer(jnp.asarray(v), jnp.asarray(i), m, dt, None))
+
+
+@eqx.filter_jit
+def _observer(v, i, m, dt, switched):
+    """The observer's rotor angle, one compiled program (not one per operation)."""
+    return algebraic_observer(v, i, jnp.zeros(v.shape[0]), m, dt=dt, switched=switched).delta_rad
 
 
 def _q_axis(**kw):
@@ -155,14 +161,13 @@ def test_q_axis_circuits_through_a_switching():
     the ramp; 2.6 mrad from 0.2 s on, and nothing before the switching."""
     from jaxdse._core.signals import jumps
 
-    t, v, i, delta = _genrou_swing(60, 0.3)
+    t, v, i, delta = _genrou_swing(60, 0.3, seconds=1.6)
     k = int(np.argmin(np.abs(t - 1.0)))
     switched = jumps(jnp.asarray(v), 4.0, 10.0)
     assert np.flatnonzero(np.asarray(switched)).tolist() == [k]
     m = jd.Machine(xd_pu=ROU["xd_pu"], xq_pu=ROU["xq_pu"], xd1_pu=ROU["xd1_pu"], rs_pu=0.0,
                    td01_s=ROU["td0_1_s"], q_axis=_q_axis(s10=0.09, s12=0.38))
-    held = np.abs(np.asarray(algebraic_observer(jnp.asarray(v), jnp.asarray(i), jnp.zeros(len(v)), m,
-                                                dt=t[1] - t[0], switched=switched).delta_rad) - delta)
+    held = np.abs(np.asarray(_observer(jnp.asarray(v), jnp.asarray(i), m, t[1] - t[0], switched)) - delta)
     ramp = np.abs(_observed_delta(v, i, t[1] - t[0], _q_axis(s10=0.09, s12=0.38)) - delta)
     assert np.max(held[:k + 1]) < 6e-5
     assert np.max(held[k + 1:]) < 0.045 < 0.06 < np.max(ramp[k + 1:])
@@ -179,12 +184,12 @@ def test_measured_speed_through_a_switching():
     from jaxdse._core.front_end import front_end
     from jaxdse._core.signals import smooth_derivative
 
-    t, v, i, delta, f, _ = _genrou_swing(60, 0.3, with_speed=True)
+    t, v, i, delta, f, _ = _genrou_swing(60, 0.3, with_speed=True, seconds=1.6)
     rec = jd.Recording(t_s=t, v_mag_pu=np.abs(v), v_ang_rad=np.unwrap(np.angle(v)), i_mag_pu=np.abs(i),
                        i_ang_rad=np.unwrap(np.angle(i)), f_hz=f, location="terminal")
     machine = jd.Machine(xd_pu=ROU["xd_pu"], xq_pu=ROU["xq_pu"], xd1_pu=ROU["xd1_pu"], rs_pu=0.0,
                          td01_s=ROU["td0_1_s"], f_nominal_hz=60.0, q_axis=_q_axis(s10=0.09, s12=0.38))
-    fe = front_end(rec, jd.Plant(machine=machine, s_base_mva=machine.s_rated_mva))
+    fe = eqx.filter_jit(front_end)(rec, jd.Plant(machine=machine, s_base_mva=machine.s_rated_mva))
     seen = np.asarray(smooth_derivative(jnp.asarray(delta), t[1] - t[0], 5))
     err = np.abs(np.asarray(fe.x2_meas) - seen)[5:-5]
     assert np.max(err) < 0.2
