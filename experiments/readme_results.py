@@ -98,7 +98,8 @@ def block() -> str:
             f"machines' H within 2 % of the truth on {100 * w['within_2pct']:.0f} % of {w['recordings']} "
             f"recordings (line trips {100 * w['line_trip_within_2pct']:.0f} %), within 5 % on "
             f"{100 * w['within_5pct']:.0f} %; `identified` more than 10 % off: {w['identified_over_10pct_off']}; "
-            f"`identified` with an interval that misses the truth: {w['identified_interval_misses']}. Without "
+            f"`identified` with an interval that misses the truth: {w['identified_interval_misses']}; `failed` "
+            f"(the replay's solver at the batch's step cap): {len(w.get('failed', []))}. Without "
             f"the inverter plant: {100 * c['within_2pct']:.0f} %, {100 * c['line_trip_within_2pct']:.0f} %, "
             f"{100 * c['within_5pct']:.0f} % of {c['recordings']}.")
     iv = [load(f"experiments/andes_ibr_validate/{f}.json")

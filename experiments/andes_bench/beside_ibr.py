@@ -80,6 +80,8 @@ def summary(rows) -> dict:
             "identified": len(ident),
             "identified_over_10pct_off": sum(abs(r["H_error_percent"]) > 10 for r in ident),
             "identified_interval_misses": sum(not r["covers"] for r in ident),
+            "failed": [f"{r['case']}/{r['event']}/{r['machine']}: {', '.join(r['reasons'])}"
+                       for r in rows if r["verdict"] == "failed"],
             "interval_covers": float(np.mean([r["covers"] for r in rows]))}
 
 
@@ -96,7 +98,8 @@ def report(res) -> str:
         f"With inverters: H within 2 % on {100 * s['within_2pct']:.0f} % of {s['recordings']} machine-recordings "
         f"(line trips {100 * s['line_trip_within_2pct']:.0f} %), within 5 % on {100 * s['within_5pct']:.0f} %; "
         f"{s['identified_over_10pct_off']} `identified` more than 10 % off; {s['identified_interval_misses']} "
-        "`identified` whose interval misses the truth.",
+        "`identified` whose interval misses the truth; "
+        f"{len(s['failed'])} `failed`{': ' + '; '.join(s['failed']) if s['failed'] else ''}.",
         "",
         "| case | inverter-based plant | recordings | within 2 % | line trips within 2 % | within 5 % | "
         "identified | identified > 10 % off | identified, interval misses |",
