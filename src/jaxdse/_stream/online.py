@@ -217,7 +217,6 @@ class OnlineGroup:
         self.seg_start = np.full(self.u, -1, np.int64)
         self.segment = np.zeros(self.u, np.int64)
         self.started = np.zeros(self.u, bool)             # the segment's first chunk is done
-        self.starting = True     # the group's start: until every unit with samples has a full window
         self.small = -(-self.u // SMALL_SHARE) if self.u >= MIN_SMALL else 0   # rows of the few-units batch
         self.q_disc = _q_discs(self.plants, self.dt)   # the slices' step: t_s = arange(span) dt
         self.carries = None
@@ -371,28 +370,20 @@ class OnlineGroup:
         return bool(self._ready()[0].any())
 
     def catch_up(self) -> list[Update]:
-        """One chunk of the units whose chunk is ready, deferred ones included: at most the small
-        batch's (the first ready ones) where the group has one, so that a frame and the system
-        inertia's lines wait for a small batch's call at most. A start's first chunks on the
-        whole group held them 2-3 s (5,016 units on 6 streams: the area lines' 99 % delay 2.9 s
-        against 0.8 s once the start was worked off)."""
-        return self._chunks(defer=False, at_most=self.small)
+        """One chunk of every unit whose chunk is ready, deferred ones included."""
+        return self._chunks(defer=False)
 
-    def _chunks(self, defer: bool | None = None, at_most: int = 0) -> list[Update]:
+    def _chunks(self, defer: bool | None = None) -> list[Update]:
         ready, span = self._ready()
-        if at_most and ready.sum() > at_most:
-            ready = np.isin(np.arange(self.u), np.flatnonzero(ready)[:at_most])
         if (self.defer if defer is None else defer) and ready.any():
             # background, up to the lag: a few units in a new segment (the small batch's) while
-            # others are in service, and every unit's in the group's start, until each unit with
-            # samples has a full window (every unit of every stream reaches its first chunk in the
-            # same second, and the frames and the system inertia's lines would wait behind them;
-            # catch_up takes them a small batch at a time); a larger restart runs with the frames
+            # others are in service, and every unit's while none is (a start: every unit of every
+            # stream reaches its first chunk in the same second, and the frames and the system
+            # inertia's lines would wait behind them); a larger restart runs with the frames
             filling = self.filled < self.window.blocks
-            self.starting = self.starting and bool((filling & (self.seg_start >= 0)).any())
             behind = self.last_valid - (self.slice_start + span - 1)
             later = ready & filling & (behind < self.lag)
-            if self.starting or later.sum() <= self.small:
+            if filling.all() or later.sum() <= self.small:
                 ready &= ~later
         if not ready.any():
             return []
