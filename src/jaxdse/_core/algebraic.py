@@ -83,10 +83,13 @@ def algebraic_observer(v_t, i_t, theta_ref, machine: Machine, rel0=None, dt=None
 def q_axis_discretisation(machine: Machine, dt):
     """(Phi, G0, G1, G0s, G1s) of the q-axis circuits of ``machine`` (``Machine.q_axis``) over
     a step ``dt``: Iq's and the saturation term's hold (:func:`q_axis_lag`)."""
-    q = machine.q_axis
-    a, b, _ = q.state_space(machine.xq_pu)
+    return _discretisation(machine.q_axis, machine.xq_pu, machine.xd_pu, dt)
+
+
+def _discretisation(q: QAxisCircuits, xq, xd, dt):
+    a, b, _ = q.state_space(xq)
     phi, g0, g1 = hold_discretisation(a, b, dt)
-    _, g0s, g1s = hold_discretisation(a, q.saturation_input(machine.xq_pu, machine.xd_pu), dt)
+    _, g0s, g1s = hold_discretisation(a, q.saturation_input(xq, xd), dt)
     return phi, g0, g1, g0s, g1s
 
 
@@ -118,11 +121,7 @@ def q_axis_lag(dq, psi_mag, q: QAxisCircuits, xq, xd, dt, state0=None, disc=None
     """
     a, b, c = q.state_space(xq)
     bs = q.saturation_input(xq, xd)
-    if disc is None:
-        phi, g0, g1 = hold_discretisation(a, b, dt)
-        _, g0s, g1s = hold_discretisation(a, bs, dt)
-    else:
-        phi, g0, g1, g0s, g1s = disc
+    phi, g0, g1, g0s, g1s = _discretisation(q, xq, xd, dt) if disc is None else disc
     gap = xq - q.xq2_pu
     # |psi''| = |V + (Rs + j X'') I| = |psi - (xq - X''q) dq| in the frame of psi (frame-free)
     sat = q.saturation(jnp.abs(psi_mag - gap * dq))
