@@ -199,7 +199,10 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
     """With ``defer`` (the live monitor), a start and a unit restarted while another serves are
     background work: the serving unit's updates come at the same frames as without it, the
     deferred chunks run in ``catch_up`` (here every 4th frame, or never: then once their backlog
-    reaches ``BACKGROUND_LAG_S``, here 2 s), and both units get the updates they get alone."""
+    reaches ``BACKGROUND_LAG_S``, here 2 s: a unit in service a chunk or more behind catches
+    up in spare time too), and both units get the updates they get alone. The
+    deferred group's estimates are dispatched, not waited for: read here at their frame
+    (``collect(wait=True)``), as the monitor reads them once done."""
     from jaxdse._stream import online
 
     g, rec, window, usable = _pair_with_a_restart(example, monkeypatch)
@@ -213,12 +216,15 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
         x = [rec.v_mag_pu[k], rec.v_ang_rad[k], rec.i_mag_pu[k], rec.i_ang_rad[k], rec.f_hz[k]]
         for grp in (now, later):
             got[grp.defer] += [(k, u) for u in grp.push(BASE + k, *[[v, v] for v in x], usable[k])]
+        got[True] += [(k, u) for u in later.collect(wait=True)]
         if later.behind():
             deferred += 1
             if every and k % every == 0:
-                got[True] += [(k, u) for u in later.catch_up()]
+                got[True] += [(k, u) for u in later.catch_up() + later.collect(wait=True)]
     while later.behind():
         got[True] += [(1750, u) for u in later.catch_up()]
+    got[True] += [(1750, u) for u in later.collect(wait=True)]
+    assert not later.waiting()
     # its chunks waited: for a catch_up (up to 3 frames each), or up to the lag (50 frames)
     assert deferred > (every or 30)
     for n in "ab":
@@ -229,10 +235,79 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
             assert u.h_s == pytest.approx(w.h_s, rel=1e-12) and u.h_ci95 == pytest.approx(w.h_ci95, rel=1e-12)
         if n == "a":   # its start was background too (late by at most the lag); in service: same frames
             assert all(0 <= kb - ka <= 50 + 1 for (ka, _), (kb, _) in zip(a, b))
-            assert [k for k, _ in a if k >= 1000] == [k for k, _ in b if k >= 1000]
+            if every:   # without spare time it stays behind by a chunk or more, up to the lag
+                assert [k for k, _ in a if k >= 1000] == [k for k, _ in b if k >= 1000]
         else:                                                  # restarted: later, by at most the lag
             late = [kb - ka for (ka, u), (kb, _) in zip(a, b) if u.segment == 2]
             assert late and max(late) > 0 and max(late) <= 50 + 1
+
+
+def test_a_deferred_groups_estimates_are_read_once_done_and_none_is_lost(example, monkeypatch):
+    """With ``defer``, a window's estimate is dispatched and its updates are read when done
+    (``collect``, and each push reads those done): none is lost or repeated, each unit's come in
+    time order, the same as the group's that waits for each; at most ``MAX_PENDING`` wait."""
+    from jaxdse._stream import online
+
+    g, rec, window, usable = _pair_with_a_restart(example, monkeypatch)
+    monkeypatch.setattr(online, "MAX_PENDING", 2)
+    now, later = (OnlineGroup(["a", "b"], [g.plant] * 2, [rec.location] * 2, 25.0, window, defer=d)
+                  for d in (False, True))
+    got = {False: [], True: []}
+    most = 0
+    for k in range(1750):
+        x = [rec.v_mag_pu[k], rec.v_ang_rad[k], rec.i_mag_pu[k], rec.i_ang_rad[k], rec.f_hz[k]]
+        for grp in (now, later):
+            got[grp.defer] += grp.push(BASE + k, *[[v, v] for v in x], usable[k])
+        most = max(most, len(later.pending))
+        if k % 50 == 0:
+            got[True] += later.catch_up()
+    while later.behind():
+        got[True] += later.catch_up()
+    got[True] += later.collect(wait=True)
+    assert got[False] and not later.waiting() and most <= 2
+    key = (lambda u: (u.unit, u.t))
+    assert sorted(map(key, got[False])) == sorted(map(key, got[True]))
+    for n in "ab":
+        times = [u.t for u in got[True] if u.unit == n]
+        assert times == sorted(times) and len(set(times)) == len(times)
+    mine = {key(u): u for u in got[True]}
+    for u in got[False]:
+        w = mine[key(u)]
+        assert (u.verdict, u.segment, u.samples) == (w.verdict, w.segment, w.samples)
+        assert u.h_s == pytest.approx(w.h_s, rel=1e-12)
+
+
+def test_deferred_chunks_go_to_the_computer_one_per_group_and_a_first_only_when_it_is_idle():
+    """A stream's catch-up picks a group that has deferred chunks and whose previous chunk is
+    computed; a segment's first chunk (the large one) only when no group is busy; ``force``
+    (the stop's drain) takes any that has them."""
+    from jaxdse._stream.monitor import _Stream
+
+    class G:
+        def __init__(self, name, behind, busy, first):
+            self.name, self._behind, self._busy, self._first = name, behind, busy, first
+
+        def behind(self):
+            return self._behind
+
+        def busy(self):
+            return self._busy
+
+        def first_behind(self):
+            return self._first
+
+        def catch_up(self):
+            return [self.name]
+
+    s = object.__new__(_Stream)
+    s.groups = [(G("busy", True, True, False), None), (G("first", True, False, True), None)]
+    assert s.can_catch_up(idle=True) and s.catch_up(idle=True) == ["first"]
+    assert not s.can_catch_up(idle=False) and s.catch_up(idle=False) == []
+    assert s.catch_up(force=True) == ["busy"]
+    s.groups.append((G("next", True, False, False), None))
+    assert s.can_catch_up(idle=False) and s.catch_up(idle=False) == ["next"]
+    s.groups = [(G("done", False, False, False), None)]
+    assert not s.can_catch_up(idle=True) and s.catch_up(force=True) == []
 
 
 @pytest.mark.slow

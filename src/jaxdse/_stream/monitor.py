@@ -19,6 +19,8 @@ drops or stays silent, so one stream's failure costs its units only. The main th
   every frame but ``REPEATS_RARE`` of the time, as the file readers judge a whole recording);
 * feeds the units' samples to :class:`~.online.OnlineGroup` (bridging short gaps, restarting a
   unit's estimator after a long one) and writes each update as a line of ``updates.jsonl``;
+  the estimators' programs run while it goes on with the frames, and their updates are read
+  once computed (:meth:`~.online.OnlineGroup.collect`);
 * on a new configuration (CFGCNT or the layout changed, STAT bit 10's announcement done), re-maps
   the stations and restarts that stream's estimators, and says so;
 * records every released frame as the monitor used it to ``recording_<k>.csv`` (per unit: V
@@ -720,13 +722,44 @@ class _Stream:
         """Whether deferred chunks (a start's, a restarted unit's) wait for :meth:`catch_up`."""
         return any(group.behind() for group, _ in self.groups)
 
-    def catch_up(self) -> list[Update]:
-        """One deferred chunk of each unit of the first group that has them (the main thread's
-        spare time; a group at a time, so that a frame waits for one group's call at most)."""
+    def catch_up(self, force: bool = False, idle: bool = True) -> list[Update]:
+        """One deferred chunk of each unit of the first group that may run them
+        (:meth:`can_catch_up`; ``force``: any that has them); the main thread's spare time, a
+        group at a time, so that a frame waits for one group's call at most."""
         for group, _ in self.groups:
-            if group.behind():
+            if group.behind() and (force or self._may(group, idle)):
                 return group.catch_up()
         return []
+
+    def can_catch_up(self, idle: bool) -> bool:
+        """Whether a group has deferred chunks and its previous chunk is computed; a segment's
+        first chunk (30 s of samples, 1-2 s for 836 units) only while the computer is ``idle``
+        (no group of any stream busy), so that a start's six do not queue at once."""
+        return any(group.behind() and self._may(group, idle) for group, _ in self.groups)
+
+    @staticmethod
+    def _may(group, idle: bool) -> bool:
+        return not group.busy() and (idle or not group.first_behind())
+
+    def waiting(self) -> bool:
+        """Whether dispatched estimates wait to be read (:meth:`collect`)."""
+        return any(group.waiting() for group, _ in self.groups)
+
+    def busy(self) -> bool:
+        """Whether the computer works on a group's programs (:meth:`OnlineGroup.busy`)."""
+        return any(group.busy() for group, _ in self.groups)
+
+    def collect(self, wait: bool = False, most: int | None = None) -> list[Update]:
+        """The updates of the groups' dispatched estimates that are done (``wait``: all; ``most``:
+        of at most this many chunks, from the first groups that have them)."""
+        out = []
+        for group, _ in self.groups:
+            if most is not None and most <= 0:
+                break
+            got = len(group.pending)
+            out += group.collect(wait, most)
+            most = None if most is None else most - (got - len(group.pending))
+        return out
 
     def _stale(self, v, i, usable):
         """Samples that repeat the unit's previous one exactly in both phasors, where a second of
@@ -895,6 +928,7 @@ class Monitor:
         self.processing = []     # seconds of the main thread per data frame (updates included)
         self.processing_cpu = []  # ... of its CPU time (the same without other processes' share of the cores)
         self.catch_up_s, self._next_catch_up = 0.0, 0   # restarted units' deferred chunks
+        self._next_collect = 0
 
     def emit(self, updates: list[Update], stream: _Stream | None = None, timed: bool = True):
         """Log, record, publish and show ``updates`` of ``stream``; their delay is measured on the
@@ -1011,10 +1045,10 @@ class Monitor:
             while duration_s is None or time.monotonic() - t0 - sum(s.compile_s for s in self.streams) < duration_s:
                 try:
                     self._handle(q.get_nowait())
-                except queue.Empty:     # no frame waits: a restarted unit's chunks, or wait for one
-                    if not self._catch_up():
+                except queue.Empty:     # no frame waits: estimates done, deferred chunks, or wait for one
+                    if not self._collect() and not self._catch_up():
                         try:
-                            self._handle(q.get(timeout=0.05))
+                            self._handle(q.get(timeout=0.01 if self._waiting() else 0.05))
                         except queue.Empty:
                             pass
                 if time.monotonic() >= next_progress:
@@ -1035,7 +1069,8 @@ class Monitor:
             for s in self.streams:
                 self.emit(s.release(everything=True), s, timed=False)
                 while s.behind():
-                    self.emit(s.catch_up(), s, timed=False)
+                    self.emit(s.catch_up(force=True), s, timed=False)
+                self.emit(s.collect(wait=True), s, timed=False)
                 s.close()
             if self._jsonl is not None:
                 self._jsonl.close()
@@ -1045,14 +1080,37 @@ class Monitor:
                 call(self.view.stop, 5.0, "stopping the live view's web server", self.log)
         return self._finish(time.monotonic() - t0)
 
-    def _catch_up(self) -> bool:
-        """One round of deferred chunks on the next stream that has them; whether there was one."""
+    def _waiting(self) -> bool:
+        return any(s.waiting() or s.busy() for s in self.streams)
+
+    def _collect(self) -> bool:
+        """The updates of one chunk's estimates that are done (dispatched with a frame or a
+        catch-up, computed while the main thread went on with the frames), on the next stream
+        that has them; whether there were any. The main thread's spare time, one chunk at a
+        time: the frames, and the system inertia's lines, wait for one chunk's updates at most."""
         n = len(self.streams)
         for j in range(n):
+            s = self.streams[(self._next_collect + j) % n]
+            if s.waiting():
+                updates = s.collect(most=1)
+                if updates:
+                    self._next_collect = (s.k + 1) % n
+                    self.emit(updates, s)
+                    return True
+        return False
+
+    def _catch_up(self) -> bool:
+        """One round of deferred chunks on the next stream that has them, of a group whose
+        previous chunk is computed (a chunk per group in the computer's queue, and a segment's
+        first only in an empty one: the CPU client runs a bounded number of dispatched programs,
+        and a dispatch beyond it waits, with the frames, for the oldest); whether there was one."""
+        n = len(self.streams)
+        idle = not any(s.busy() for s in self.streams)
+        for j in range(n):
             s = self.streams[(self._next_catch_up + j) % n]
-            if s.behind():
+            if s.can_catch_up(idle):
                 t0 = time.perf_counter()
-                self.emit(s.catch_up(), s)
+                self.emit(s.catch_up(idle=idle), s)
                 self.catch_up_s += time.perf_counter() - t0
                 self._next_catch_up = (s.k + 1) % n
                 return True

@@ -24,7 +24,10 @@ unit, as the file readers do (``jaxdse._io.measurement``):
   few units (the small batch's) that restart while others of their group have estimates are
   background work: their chunks wait for :meth:`OnlineGroup.catch_up`, which the monitor calls
   when no frame is waiting, so that they delay neither the frames nor the estimates in
-  service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again.
+  service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again;
+* with ``defer`` too, the programs are dispatched and not waited for: the window estimates'
+  updates are read once computed (:meth:`OnlineGroup.collect`, and each push reads those done),
+  while the main thread goes on with the frames; at most ``MAX_PENDING`` wait unread.
 
 Each chunk's block goes into its unit's ring of the window's blocks, in place; after it, a unit
 whose window is full gets an :class:`Update` (H and D with their 95 % intervals and the verdict
@@ -36,6 +39,7 @@ unit; a late sample), on a small batch (:data:`SMALL_SHARE`).
 
 from __future__ import annotations
 
+import collections
 import dataclasses
 import functools
 import math
@@ -106,7 +110,47 @@ def _per_unit(chunk, recs, *batched):
     return jax.vmap(one)(recs.v_mag_pu, recs.v_ang_rad, recs.i_mag_pu, recs.i_ang_rad, recs.f_hz, *batched)
 
 
-@eqx.filter_jit
+class _Static:
+    """The non-array part of a call's arguments as a key of jax.jit's cache (its treedef and
+    leaves, compared and hashed as eqx.filter_jit compares them)."""
+
+    def __init__(self, tree):
+        self.tree = tree
+        leaves, self.treedef = jax.tree_util.tree_flatten(tree)
+        self.key = (self.treedef, tuple(leaves))
+
+    def __hash__(self):
+        return hash(self.key)
+
+    def __eq__(self, other):
+        return isinstance(other, _Static) and self.key == other.key
+
+
+def _dispatched(fun):
+    """``fun`` compiled over the array leaves of its arguments, the rest static (as
+    eqx.filter_jit), that returns once the call is dispatched: eqx.filter_jit waits for each
+    result (to raise its runtime errors there), and the monitor's main thread then waited for
+    every chunk (a start's first chunk, 1-2 s a group of 836 units, with the frames and the
+    system inertia's lines queued behind it). The outputs' non-array leaves are kept from the
+    trace. A runtime error is raised where the result is read (:meth:`OnlineGroup.collect`)."""
+    rest = {}
+
+    @functools.partial(jax.jit, static_argnums=0)
+    def run(static, dynamic):
+        arrays, rest[static] = eqx.partition(fun(*eqx.combine(dynamic, static.tree)), eqx.is_array)
+        return arrays
+
+    @functools.wraps(fun)
+    def call(*args):
+        dynamic, static = eqx.partition(args, eqx.is_array)
+        key = _Static(static)
+        arrays = run(key, dynamic)
+        return eqx.combine(arrays, rest[key])
+
+    return call
+
+
+@_dispatched
 def _first(recs, plants, q_disc, config, settings, ident, size, start, chunks):
     """A segment's first slice: the blocks of its first ``chunks`` chunks ([U, chunks, ...]) in one call."""
     return _per_unit(
@@ -114,7 +158,7 @@ def _first(recs, plants, q_disc, config, settings, ident, size, start, chunks):
         recs, plants, q_disc)
 
 
-@eqx.filter_jit
+@_dispatched
 def _next(recs, plants, q_disc, carries, config, settings, ident, size):
     return _per_unit(lambda r, p, q, c: window_chunk(r, p, config, settings, ident, c, size, q_disc=q),
                      recs, plants, q_disc, carries)
@@ -150,7 +194,7 @@ def _push_first(ring, blocks, ready):
                                   ring, blocks)
 
 
-@eqx.filter_jit
+@_dispatched
 def _estimates(ring, filled, carries, plants, ident, window, verdict_settings):
     """The window estimate and verdict of every unit from its ring (called once a unit's window
     is full: while every window fills, at a start, a chunk costs no estimate)."""
@@ -174,9 +218,13 @@ repeated to fill it), gathered and scattered back, not on the group's whole batc
 a restarted plant's 46 copies cost a 3.9 s whole-batch first chunk. Groups of ``MIN_SMALL``
 units or more."""
 MIN_SMALL = 16
-BACKGROUND_LAG_S = 15.0
+MAX_PENDING = 12
+"""Dispatched estimates of a group that the monitor may leave unread (:meth:`OnlineGroup.collect`)
+before the next frame waits for the oldest: 12 chunks' estimates, 2 s of a start's catch-up."""
+BACKGROUND_LAG_S = 30.0
 """The stream time a deferred unit's chunks may fall behind the frames [s] (buffer room:
-5 x 8 bytes per unit and sample) before they run with the frames again."""
+5 x 8 bytes per unit and sample) before they run with the frames again: at a start of 4,788
+units on 2 cores the last group's first chunk waits about 10 s for the five before it."""
 
 
 class OnlineGroup:
@@ -224,6 +272,8 @@ class OnlineGroup:
         self.filled = np.zeros(self.u, np.int32)   # blocks in each ring (host: a restart is no device op)
         self.last_h = [None] * self.u
         self.last_h_t = [None] * self.u
+        self.pending = collections.deque()   # with defer: dispatched estimates not yet read (collect)
+        self.computing = None                # an output of the latest chunk dispatched
 
     # --- samples ---------------------------------------------------------------------------
 
@@ -232,6 +282,11 @@ class OnlineGroup:
         whether its sample is usable. Returns the updates of the chunks it completes."""
         if self.base is None:
             self.base = index
+        out = []
+        # a unit whose gap outgrows max_gap leaves the buffer's keeping: its deferred chunks
+        # (those its samples before the gap complete) run now, not at its restart
+        while (self._ready()[0] & (self.last_valid < index - self.max_gap - 1)).any():
+            out += self._chunks(defer=False)
         self._make_room(index)
         col = index - self.base
         values = np.stack([np.asarray(v_mag, float), np.asarray(v_ang, float), np.asarray(i_mag, float),
@@ -246,7 +301,7 @@ class OnlineGroup:
         if restart.any():
             self._restart(np.flatnonzero(restart), index)
         self.last_valid = np.where(usable, index, self.last_valid)
-        return self._chunks()
+        return out + self._chunks() + self.collect(most=0, late_from=index - self.size // 2)
 
     def _make_room(self, index: int):
         col = index - self.base
@@ -298,6 +353,7 @@ class OnlineGroup:
         def programs(n, plants, q_disc):
             first, carries = _first(flat(self.span + self.start, n), plants, q_disc, self.config,
                                     self.settings, self.ident, self.size, self.start, self.first_chunks)
+            jax.block_until_ready(_initial(first, carries, True, self.window.blocks, self.u, n == self.u))
             blocks, carries = _next(flat(self.span, n), plants, q_disc, carries, self.config, self.settings,
                                     self.ident, self.size)
             ring = _empty_ring(blocks, self.window.blocks)
@@ -371,7 +427,40 @@ class OnlineGroup:
 
     def catch_up(self) -> list[Update]:
         """One chunk of every unit whose chunk is ready, deferred ones included."""
-        return self._chunks(defer=False)
+        return self._chunks(defer=False) + self.collect()
+
+    def first_behind(self) -> bool:
+        """Whether a segment's first chunk is ready and not run (deferred)."""
+        ready, _ = self._ready()
+        return bool((ready & ~self.started).any())
+
+    def waiting(self) -> bool:
+        """Whether estimates were dispatched that :meth:`collect` has not read yet."""
+        return bool(self.pending)
+
+    def busy(self) -> bool:
+        """Whether the computer still works on this group's latest chunk or estimate (the
+        monitor gives a group its next deferred chunk only then)."""
+        return (self.computing is not None and not self.computing.is_ready()) or any(
+            not ready() for ready, *_ in self.pending)
+
+    def collect(self, wait: bool = False, most: int | None = None, late_from: int | None = None) -> list[Update]:
+        """The updates of the dispatched estimates that are done, oldest first: of ``most`` of
+        them (None: all), and besides of those dispatched at grid index ``late_from`` or before
+        (a push reads only those dispatched half an update ago, so that a frame does not wait
+        while a thousand updates are written, unless no spare time came for them); with
+        ``wait`` of all, waiting for each; beyond ``MAX_PENDING`` the oldest is waited for (the
+        frames must not run ahead of the computer without bound)."""
+        out = []
+        while self.pending:
+            ready, sent = self.pending[0][:2]
+            forced = wait or len(self.pending) > MAX_PENDING
+            late = late_from is not None and sent <= late_from
+            if not forced and (((most is not None and most <= 0) and not late) or not ready()):
+                break
+            out += self._read(*self.pending.popleft()[2:])
+            most = None if most is None else most - 1
+        return out
 
     def _chunks(self, defer: bool | None = None) -> list[Update]:
         ready, span = self._ready()
@@ -385,23 +474,44 @@ class OnlineGroup:
             later = ready & filling & (behind < self.lag)
             if filling.all() or later.sum() <= self.small:
                 ready &= ~later
+            # in service but a chunk or more behind (after a start), while the computer still
+            # works on the group's last chunk: background too, or every frame would queue a chunk
+            # of them (30 a second, each ~0.1 s at 836 units)
+            if self.busy():
+                ready &= ~(~filling & (behind >= self.size) & (behind < self.lag))
         if not ready.any():
             return []
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
         # a segment's first chunks, then the others: each set on the whole batch or the small one
-        out = self._run(ready & ~self.started, t_end) + self._run(ready & self.started, t_end)
+        jobs = [j for j in (self._run(ready & ~self.started), self._run(ready & self.started)) if j]
         first = ready & ~self.started
         self.started |= ready
         step = np.where(first, self.first_chunks, 1) * self.size
         self.slice_start = np.where(ready, self.slice_start + step, self.slice_start)
+        if not jobs:
+            return []
+        entry = (jobs, t_end, self.segment.copy())
+        if not self.defer:
+            return self._read(*entry)
+        done = [jax.tree_util.tree_leaves(j[3])[-1] for j in jobs]
+        sent = int(self.last_valid.max())
+        self.pending.append((lambda: all(x.is_ready() for x in done), sent, *entry))
+        return []
+
+    def _read(self, jobs, t_end, segment) -> list[Update]:
+        """The updates of ``jobs`` (``_run``'s), sorted by unit."""
+        out = []
+        for units, pos, idents, verdicts in jobs:
+            out += zip(units.tolist(), self._updates(units, pos, idents, verdicts, t_end, segment))
         return [u for _, u in sorted(out, key=lambda x: x[0])]
 
-    def _run(self, ready, t_end) -> list[tuple[int, Update]]:
+    def _run(self, ready):
         """The chunks of the units ``ready`` (all of them a segment's first chunk, or none): their
-        blocks into their rings, their estimates; (unit, update) of those whose window is full."""
+        blocks into their rings, then the estimates of those whose window is full, dispatched:
+        (their units, their rows in the estimates, the estimates, the verdicts), or None."""
         units = np.flatnonzero(ready)
         if units.size == 0:
-            return []
+            return None
         first = not self.started[units[0]]
         whole = not (self.small and units.size <= self.small)
         rows = np.arange(self.u) if whole else np.resize(units, self.small)   # the batch's units
@@ -414,10 +524,9 @@ class OnlineGroup:
             recs = self._batch(rows, ready[rows], self.span)
             blocks, carries = _next(recs, plants, q_disc, self.carries if whole else _take(self.carries, rows),
                                     self.config, self.settings, self.ident, self.size)
+        self.computing = jax.tree_util.tree_leaves(blocks)[-1]
         if self.carries is None:     # every row from the first ready unit's until its own chunk
-            one = jax.tree_util.tree_map(lambda b: b[:, 0], blocks) if first else blocks
-            self.carries, self.ring = _take((carries, _empty_ring(one, self.window.blocks)),
-                                            np.arange(self.u) if whole else np.zeros(self.u, np.int64))
+            self.carries, self.ring = _initial(blocks, carries, first, self.window.blocks, self.u, whole)
         n = self.window.blocks
         if whole:
             self.carries = _where(jnp.asarray(ready), carries, self.carries)
@@ -440,12 +549,12 @@ class OnlineGroup:
             pos = np.arange(units.size)      # np.resize put the ready units first
         done = self.filled[units] >= n
         if not done.any():
-            return []
+            return None
         idents, verdicts = _estimates(ring, jnp.asarray(filled), carries, plants,
                                       self.ident, self.window, self.verdict_settings)
-        return list(zip(units[done].tolist(), self._updates(units[done], pos[done], idents, verdicts, t_end)))
+        return units[done], pos[done], idents, verdicts
 
-    def _updates(self, units, pos, idents, verdicts, t_end) -> list[Update]:
+    def _updates(self, units, pos, idents, verdicts, t_end, segment) -> list[Update]:
         """The :class:`Update` of each unit in ``units``, whose estimate is row ``pos`` of
         ``idents`` and ``verdicts``: the fields it needs are taken to the host once for the
         group, as Python numbers (a per-unit slice of the whole estimate cost about 0.1 ms per
@@ -476,7 +585,7 @@ class OnlineGroup:
                 d_ci95=(float(d_ci[k][0]), float(d_ci[k][1])) if named else None,
                 verdict=word, reasons=reasons,
                 age_s=None if self.last_h_t[u] is None else round(t - self.last_h_t[u], 9),
-                last_h_s=self.last_h[u], segment=int(self.segment[u]), window_s=window_s,
+                last_h_s=self.last_h[u], segment=int(segment[u]), window_s=window_s,
                 samples=int(samples[k])))
         return out
 
@@ -484,6 +593,16 @@ class OnlineGroup:
 def _empty_ring(blocks, n):
     """A ring of ``n`` empty blocks per unit, shaped after ``blocks`` [U, ...]."""
     return jax.tree_util.tree_map(lambda b: jnp.zeros((b.shape[0], n) + b.shape[1:], b.dtype), blocks)
+
+
+@functools.partial(jax.jit, static_argnums=(2, 3, 4, 5))
+def _initial(blocks, carries, first, n, u, whole):
+    """A group's carries and empty rings ([u] rows) from its first chunk's ``blocks`` and
+    ``carries`` (a segment's first: [rows, k, ...]; ``whole``: of the whole group, else every row
+    the first's), in one compiled call (eager, the slices compiled at the first chunk, ~1 s)."""
+    one = jax.tree_util.tree_map(lambda b: b[:, 0], blocks) if first else blocks
+    rows = jnp.arange(u) if whole else jnp.zeros(u, int)
+    return jax.tree_util.tree_map(lambda x: x[rows], (carries, _empty_ring(one, n)))
 
 
 @jax.jit
