@@ -474,11 +474,9 @@ class OnlineGroup:
             later = ready & filling & (behind < self.lag)
             if filling.all() or later.sum() <= self.small:
                 ready &= ~later
-            # in service but a chunk or more behind (after a start), while the computer still
-            # works on the group's last chunk: background too, or every frame would queue a chunk
-            # of them (30 a second, each ~0.1 s at 836 units)
-            if self.busy():
-                ready &= ~(~filling & (behind >= self.size) & (behind < self.lag))
+            # in service but a chunk or more behind (after a start): its catch-up is background
+            # too, or every frame would run a chunk of them (30 a second, each ~0.1 s at 836 units)
+            ready &= ~(~filling & (behind >= self.size) & (behind < self.lag))
         if not ready.any():
             return []
         t_end = (self.slice_start + self.halo + self.size - 1) / self.rate
