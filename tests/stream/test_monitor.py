@@ -242,6 +242,7 @@ def test_a_restarted_unit_waits_for_spare_time_and_others_do_not(example, monkey
             assert late and max(late) > 0 and max(late) <= 50 + 1
 
 
+@pytest.mark.slow
 def test_a_deferred_groups_estimates_are_read_once_done_and_none_is_lost(example, monkeypatch):
     """With ``defer``, a window's estimate is dispatched and its updates are read when done
     (``collect``, and each push reads those done): none is lost or repeated, each unit's come in
