@@ -26,8 +26,9 @@ unit, as the file readers do (``jaxdse._io.measurement``):
   when no frame is waiting, so that they delay neither the frames nor the estimates in
   service; a unit whose backlog reaches ``BACKGROUND_LAG_S`` is served with the frames again;
 * with ``defer`` too, the programs are dispatched and not waited for: the window estimates'
-  updates are read once computed (:meth:`OnlineGroup.collect`, and each push reads those done),
-  while the main thread goes on with the frames; at most ``MAX_PENDING`` wait unread.
+  updates are read once computed (:meth:`OnlineGroup.collect` in the monitor's spare time, or
+  by a push half an update after their dispatch), while the main thread goes on with the
+  frames; at most ``MAX_PENDING`` wait unread.
 
 Each chunk's block goes into its unit's ring of the window's blocks, in place; after it, a unit
 whose window is full gets an :class:`Update` (H and D with their 95 % intervals and the verdict
@@ -220,7 +221,7 @@ units or more."""
 MIN_SMALL = 16
 MAX_PENDING = 12
 """Dispatched estimates of a group that the monitor may leave unread (:meth:`OnlineGroup.collect`)
-before the next frame waits for the oldest: 12 chunks' estimates, 2 s of a start's catch-up."""
+before the next frame waits for the oldest."""
 BACKGROUND_LAG_S = 30.0
 """The stream time a deferred unit's chunks may fall behind the frames [s] (buffer room:
 5 x 8 bytes per unit and sample) before they run with the frames again: at a start of 4,788
