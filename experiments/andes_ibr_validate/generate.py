@@ -7,8 +7,8 @@ Run with the separate ANDES venv (ANDES is GPL-3: an external simulator only, ne
     /work/andes-venv/bin/python experiments/andes_ibr_validate/generate.py
 
 Case: ANDES's ``ieee14/ieee14_solar.xlsx`` (one PV plant at bus 8, MBASE = 100 MVA), the
-REGCA1 and REECA1 constants of ``experiments/andes_ibr`` (see its notes) except Iolim and Trv
-(0.02 s), and the case's REPCA1 switched ON with constants under which ANDES and the WECC REPC_A agree:
+REGCA1 and REECA1 constants of ``experiments/andes_ibr`` (see its notes; REECA1 Trv = 0) except
+Iolim, and the case's REPCA1 switched ON with constants under which ANDES and the WECC REPC_A agree:
 
 * VCFlag = 0 and Kc = 0: the controlled voltage is bus 8's own |V| (with VCFlag = 1 ANDES
   compensates with the monitored line's R and X when Rc and Xc are not given: bus 7's voltage);
@@ -31,7 +31,10 @@ Four events, 1 s after the start, recorded at bus 8, 100 frames/s for 6 s:
 * ``fault``: a 0.1 s fault at bus 9 (xf = 0.05 pu), |V| below Vdip: Kqv.
 
 Written: ``<event>.csv.gz`` (t_s, v_pu, angle_rad, freq_dev_pu, p_pu, q_pu; P and Q out of the
-terminal on MBASE) and ``plant.dyr`` (the three records in PSS/E CON order).
+terminal on MBASE; freq_dev_pu is bus 8's BusFreq, the frequency REPCA1 reads: a filtered
+derivative of the angle that lags its slope by 0.1-0.2 s after an event, so a playback must take
+the frequency channel, not the angle's slope: P RMS 0.05-0.09 % of MBASE against 0.21-0.25 %)
+and ``plant.dyr`` (the three records in PSS/E CON order).
 """
 
 from __future__ import annotations
@@ -52,7 +55,7 @@ FRAME_S = 0.01
 T_END_S = 6.0
 
 REGCA1 = dict(base.REGCA1, Iolim=-1.3)
-REECA1 = dict(base.REECA1, Trv=0.02)    # the recordings here were made with it (andes_ibr now 0)
+REECA1 = dict(base.REECA1)
 REPCA1 = dict(IREG=0, FROM=0, TO=0, CKT="1", VCFlag=0, RefFlag=1, Fflag=1,
               Tfltr=0.02, Kp=2.0, Ki=4.0, Tft=0.0, Tfv=0.05, Vfrz=0.0, Rc=0.0, Xc=0.0, Kc=0.0,
               emax=999.0, emin=-999.0, dbd1=0.0, dbd2=0.0, Qmax=999.0, Qmin=-999.0,

@@ -8,8 +8,7 @@ model_error = X (default 1 %), results_model_error_X.*.
 ``andes_ibr``: the bench of ``experiments/andes_ibr`` instead (REGCA1 + REECA1, REPCA1 off; its
 records match ANDES within 0.01 % of MBASE): three recordings, planted Kqv only.
 ``andes_gfm``: the grid-forming converter of ``experiments/andes_gfm`` (ANDES REGCV1 at bus 8, its
-record written from truth.json in ANDES's parameter order): three recordings, planted M = 2H. The REPCA1 bench
-of ``generate.py`` does not yet agree with ANDES (see results.md), so that is the one run.
+record written from truth.json in ANDES's parameter order): three recordings, planted M = 2H.
 
 1. Pass rate: the true plant.dyr validated on each recording alone; a recording passes when
    ``jaxdse validate`` files no change (outcome "consistent with the .dyr" or "nothing
@@ -236,10 +235,14 @@ NOTES = """## Notes
 * Each recording alone leaves Ddn or Dup (the one its frequency does not move) at its value
   with that reason: the load step only under-frequency (Dup), the load shed and the line trip
   over-frequency (Ddn).
-* Kp comes out 1.2-1.8 % below ANDES's 2.0 on these recordings with an interval narrower than
-  that (1 % model error): on the joint runs it is rejected and changed even when it is not the
-  planted one. That is the playback's own error against ANDES in the voltage loop (not
-  diagnosed); `--model-error=0.02` shows the same runs with 2 %."""
+* The playback takes the recorded frequency (ANDES's BusFreq, which REPCA1 reads) as the
+  plant's frequency input: P RMS 0.05-0.09 % of MBASE (with the voltage angle's slope it was
+  0.21-0.25 %, and Ddn came out 0.9 % low).
+* Kp comes out 1.1-1.6 % below ANDES's 2.0 on these noise-free recordings with an interval
+  narrower than that (1 % model error): on the joint runs it is rejected and changed even when
+  it is not the planted one. That is the playback's own remaining error against ANDES in the
+  voltage loop (Q RMS 0.004-0.03 % of MBASE, a steady 0.0003 pu after the load step and shed;
+  not diagnosed further); `--model-error=0.02` shows the same runs with 2 %."""
 
 
 GFM_NOTES = """## Notes

@@ -276,8 +276,8 @@ CONFIG.toml is a fleet file (see `jaxdse fleet --help`) with, optionally:
                  bounds = {H = [2.0, 8.0], KA = [10, 400]}   default [x/4, 4x]; D [0, 20]
                  max_relative_ci (0.05) calibrate only what the events fix within +-5 %
                  noise_floor_pu (0.001), bound_factor (4)
-                 model_error (0.01)  the .dyr playback's own relative error, added to the
-                   intervals of positive parameters (noise alone covers H in 78 % on the bench)
+                 model_error (0.01)  the .dyr playback's own relative error, added to every
+                   parameter's interval (noise alone covers H in 78 % on the bench)
                  input_filter_hz (0: off)  low-pass the imposed voltage inside the fit (PMU
                    noise on V biases H; a voltage-angle jump the step detector misses smears)
   [playback]     substeps, solver, ke_zero (model = "dyr" is implied)

@@ -99,7 +99,7 @@ class CalibrateOptions:
     """Smallest noise level of P and Q assumed in the ranking [pu of MBASE]."""
     model_error: float = 0.01
     """Relative error of the .dyr playback against the plant [-], added in quadrature to each
-    positive parameter's 95 % half-width (see ``jaxdse.CalibrationSettings``)."""
+    parameter's 95 % half-width (see ``jaxdse.CalibrationSettings``)."""
     input_filter_hz: float = 0.0
     """Inside the fit, low-pass the imposed |V| and angle at this cut-off [Hz] (zero phase,
     detected switching steps kept sharp; 0: off). Noise on the recorded voltage drives the
@@ -170,11 +170,14 @@ def plant_model(raw, dyr, plant, options: PlaybackOptions = PlaybackOptions()) -
     return out
 
 
-def terminal_series(t_s, v_mag, v_ang, p, q) -> TerminalSeries:
-    """A TerminalSeries from |V|, its angle (nominal frame) and P, Q out of the terminal."""
+def terminal_series(t_s, v_mag, v_ang, p, q, f_dev=None) -> TerminalSeries:
+    """A TerminalSeries from |V|, its angle (nominal frame), P, Q out of the terminal and the
+    recorded frequency deviation [pu] (None or NaN: none recorded; always an array here, so that
+    the series of one fleet share a structure)."""
     v_mag, v_ang, p, q = (np.asarray(a, dtype=float) for a in (v_mag, v_ang, p, q))
     i = (p - 1j * q) * np.exp(1j * v_ang) / np.where(v_mag > 0, v_mag, 1.0)
-    return TerminalSeries(*(jnp.asarray(a) for a in (t_s, v_mag, v_ang, i.real, i.imag)))
+    f_dev = np.full_like(v_mag, np.nan) if f_dev is None else np.asarray(f_dev, dtype=float)
+    return TerminalSeries(*(jnp.asarray(a) for a in (t_s, v_mag, v_ang, i.real, i.imag, f_dev)))
 
 
 class _Played(NamedTuple):
@@ -326,7 +329,7 @@ def play_back_plants(jobs: dict, options: PlaybackOptions) -> Iterator[tuple[str
         for k, um in enumerate(pm.units):
             scale = m_total / pm.mbase_mva[k]
             s = terminal_series(series.t_s, series.v_mag_pu, series.v_ang_rad,
-                                p * pm.share_p[k] * scale, q * pm.share_q[k] * scale)
+                                p * pm.share_p[k] * scale, q * pm.share_q[k] * scale, series.f_dev_pu)
             flat.append((name, k, um.unit, s))
     in_threads = _same_context_in_threads()
 

@@ -204,7 +204,8 @@ def dyr_playbacks(fleet: Fleet, plants: list[FleetPlant],
             yield p.name, DyrOutcome(pm, None)
             continue
         if p.ibr:
-            jobs[p.name] = (pm, terminal_series(a.time_s, a.v_t_pu, a.theta_t_rad, a.p_t_pu, a.q_t_pu))
+            jobs[p.name] = (pm, terminal_series(a.time_s, a.v_t_pu, a.theta_t_rad, a.p_t_pu, a.q_t_pu,
+                                                a.f_dev_hz / float(fleet.raw.basfrq_hz)))
             continue
         tr = a.estimate.trajectories
         jobs[p.name] = (pm, terminal_series(a.estimate.time_s, tr.v_t_pu, tr.theta_t_rad, tr.p_t_pu,

@@ -170,8 +170,12 @@ def _event_series(fleet: Fleet, p: FleetPlant, files: tuple, tables: dict, note=
     fe = jax.jit(front_end)(rec, p.run.plant, fleet.settings)
     s = fe.v_t * jnp.conj(fe.i_t)
     t = np.asarray(rec.t_s)
+    # the frequency channel as recorded (an inverter-based plant's input), else the front end's
+    f_hz = np.asarray(fe.f_hz) if rec.f_hz is None else np.where(
+        np.isnan(np.asarray(rec.f_hz)), np.asarray(fe.f_hz), np.asarray(rec.f_hz))
+    f0 = float(p.run.plant.machine.f_nominal_hz)
     return terminal_series(t - t[0], np.abs(np.asarray(fe.v_t)), np.asarray(fe.theta_t),
-                           np.asarray(jnp.real(s)), np.asarray(jnp.imag(s)))
+                           np.asarray(jnp.real(s)), np.asarray(jnp.imag(s)), f_hz / f0 - 1.0)
 
 
 def _pad(series_list):
@@ -182,8 +186,9 @@ def _pad(series_list):
         k = int(s.t_s.shape[0])
         dt = float(s.t_s[1] - s.t_s[0])
         t = np.concatenate([np.asarray(s.t_s), float(s.t_s[-1]) + dt * np.arange(1, n - k + 1)])
-        pads = [np.concatenate([np.asarray(a), np.repeat(np.asarray(a)[-1:], n - k)]) for a in s[1:]]
-        out.append(type(s)(jnp.asarray(t), *(jnp.asarray(a) for a in pads)))
+        pads = [None if a is None else jnp.asarray(np.concatenate(
+            [np.asarray(a), np.repeat(np.asarray(a)[-1:], n - k)])) for a in s[1:]]
+        out.append(type(s)(jnp.asarray(t), *pads))
         w.append(np.r_[np.ones(k), np.zeros(n - k)])
     return stack_events(out, np.stack(w))
 

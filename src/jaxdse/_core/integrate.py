@@ -83,8 +83,16 @@ class Integrator(eqx.Module):
     forward_mode: bool = eqx.field(static=True, default=False)
     """Adaptive steps differentiable in forward mode (``diffrax.ForwardMode``); the default
     adjoint (recursive checkpointing) supports reverse mode only."""
+    min_substep: float = eqx.field(static=True, default=0.0)
+    """Shortest adaptive step, as a fraction of the sample interval (0: none). A step the error
+    control would cut below it is taken at it and accepted, as a fixed-step simulator takes it:
+    a limiter that switches at every trial step (a governor valve sliding along its non-windup
+    limit under a noisy speed) then costs 1/``min_substep`` steps instead of failing."""
 
     def controller(self, h):
+        if self.min_substep > 0:
+            return diffrax.PIDController(rtol=self.rtol, atol=self.atol, dtmax=h,
+                                         dtmin=self.min_substep * h, force_dtmin=True)
         return diffrax.PIDController(rtol=self.rtol, atol=self.atol, dtmax=h)
 
     @classmethod

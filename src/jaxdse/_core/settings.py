@@ -15,7 +15,9 @@ class Settings(eqx.Module):
     """Static choices of the pipeline: integration, windows, what to keep, flag thresholds."""
 
     observer_integrator: Integrator = Integrator()
-    playback_integrator: Integrator = Integrator(rtol=1e-6, atol=1e-9)
+    playback_integrator: Integrator = Integrator(rtol=1e-6, atol=1e-9, min_substep=1 / 16)
+    """The playbacks' steps: at least 1/16 of a sample, so that a governor valve sliding along
+    its limit is played as a fixed-step simulator plays it (:attr:`Integrator.min_substep`)."""
     derivative_half_width: int = eqx.field(static=True, default=5)
     """Half width (samples) of the least-squares derivative used for x2_meas, f and Ef."""
     qss_window_s: float = eqx.field(static=True, default=30.0)

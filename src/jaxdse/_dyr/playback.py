@@ -102,6 +102,11 @@ class TerminalSeries(NamedTuple):
     i_re_pu: Float[Array, " T"]
     """Measured current (out of the machine), real part, same frame [pu]."""
     i_im_pu: Float[Array, " T"]
+    f_dev_pu: Float[Array, " T"] | None = None
+    """Recorded frequency deviation [pu of nominal] (the PMU's frequency channel; NaN where it
+    has none). An inverter-based plant's frequency input follows it, as PSS/E's PLBVFU1 plays
+    back a recorded frequency, and the voltage angle's slope where it is NaN or None. A
+    machine's playback always takes the slope."""
 
 
 class PlaybackResult(eqx.Module):
@@ -194,7 +199,8 @@ def _filtered(x, step, dt, cutoff_hz):
     return zero_phase_lowpass(x - jumps, dt, cutoff_hz) + jumps
 
 
-def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s):
+def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s,
+                    recorded_f: bool = False):
     """(k, s) -> UnitInputs on frame interval ``k`` (from frame k to k + 1) at the fraction
     ``s`` in [0, 1] of it: |V| and its angle linear between frames, except across a voltage
     step: a switching event happens just after the frame before it, so over that interval the
@@ -202,8 +208,11 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
     post-event trajectory, not a hold of the frame after the step, nor a ramp; a line through
     two frames missed the fast swing after a switching: 1.2 % of the response in the round-trip
     test, the parabola 0.5 %). Each interval is its own curve, closed at both ends, so that a solve over one interval never sees the next one's step
-    (and the frames' outputs, at ``s`` = 1 of the interval before, see the recorded frame)."""
+    (and the frames' outputs, at ``s`` = 1 of the interval before, see the recorded frame).
+    ``recorded_f``: the frequency is ``series.f_dev_pu`` (linear between frames) where it is
+    finite, else the angle's slope."""
     ts, vm, th = series.t_s, series.v_mag_pu, series.v_ang_rad
+    fr = series.f_dev_pu if recorded_f else None
     dt = ts[1] - ts[0]
     step = voltage_steps(series, settings)
     n = ts.shape[0]
@@ -225,7 +234,11 @@ def _input_function(series: TerminalSeries, settings: PlaybackSettings, omega_s)
                 jnp.where(step[k], first + (u - 0.5) * second, x[k + 1] - x[k])
 
         (m, dvm), (a, dth) = line(vm), line(th)
-        return UnitInputs(m * jnp.cos(a), m * jnp.sin(a), dth / dt / omega_s, dvm / dt)
+        f = dth / dt / omega_s
+        if fr is not None:   # the recorded channel, linear between frames
+            f_rec = fr[k] + s * (fr[k + 1] - fr[k])
+            f = jnp.where(jnp.isfinite(f_rec), f_rec, f)
+        return UnitInputs(m * jnp.cos(a), m * jnp.sin(a), f, dvm / dt)
 
     return inputs
 
@@ -260,7 +273,8 @@ def steady_start(series: TerminalSeries, settings: PlaybackSettings) -> Terminal
     early = voltage_steps(series, settings) & (series.t_s[1:] - series.t_s[0] <= settings.settle_s)
     start = jnp.max(jnp.where(early, k + 1, 0))
     keep = jnp.arange(n) >= start
-    return TerminalSeries(series.t_s, *(jnp.where(keep, a, a[start]) for a in series[1:]))
+    return TerminalSeries(series.t_s, *(None if a is None else jnp.where(keep, a, a[start])
+                                        for a in series[1:]))
 
 
 def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
@@ -277,7 +291,7 @@ def _play_back(unit: DyrUnit | IbrUnit | GfmUnit, series: TerminalSeries,
     omega_s = unit.omega_s_rad_s if (ibr or gfm) else unit.machine.omega_s_rad_s
     u0, i_re0, i_im0 = initial_operating_point(series, settings)
     y0, refs = unit.initial_state(u0, i_re0, i_im0)
-    inputs = _input_function(series, settings, omega_s)
+    inputs = _input_function(series, settings, omega_s, recorded_f=ibr)
     dt = (ts[1] - ts[0])
     controller = diffrax.PIDController(rtol=settings.rtol, atol=settings.atol)
 
