@@ -102,6 +102,21 @@ def block() -> str:
             f"(the replay's solver at the batch's step cap): {len(w.get('failed', []))}. Without "
             f"the inverter plant: {100 * c['within_2pct']:.0f} %, {100 * c['line_trip_within_2pct']:.0f} %, "
             f"{100 * c['within_5pct']:.0f} % of {c['recordings']}.")
+    acc = load("experiments/ibr_accuracy/results.json")
+    if acc:
+        def chain(c):
+            lim = f", limits or freezes reached on {c['limits_reached']}" if c["limits_reached"] else ""
+            return (f"{c['chain']}: {c['recordings']} recordings, median {c['median_rms_p_pct']:.3f} / "
+                    f"{c['median_rms_q_pct']:.3f}, worst {c['worst_rms_p_pct']:.3f} / "
+                    f"{c['worst_rms_q_pct']:.3f}{lim}")
+        out.append(
+            "- **Inverter-based model chains against ANDES** (`experiments/ibr_accuracy/results.md`, `python "
+            "experiments/ibr_accuracy/run.py`; the benches' own `generate.py` say which constants make "
+            "ANDES follow the WECC specification): each chain's records played back with ANDES's terminal "
+            "voltage and frequency channel imposed, RMS error of P / Q in % of MBASE, median and worst over "
+            "its recordings: " + "; ".join(chain(c) for c in acc["chains"])
+            + ". Every chain within 0.1 % (median) and 0.5 % (each recording): "
+            f"{'yes' if acc['all_meet'] else 'no'}.")
     iv = [load(f"experiments/andes_ibr_validate/{f}.json")
           for f in ("results_andes_ibr", "results", "results_model_error_0.02")]
     if all(iv):

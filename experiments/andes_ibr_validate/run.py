@@ -238,11 +238,10 @@ NOTES = """## Notes
 * The playback takes the recorded frequency (ANDES's BusFreq, which REPCA1 reads) as the
   plant's frequency input: P RMS 0.05-0.09 % of MBASE (with the voltage angle's slope it was
   0.21-0.25 %, and Ddn came out 0.9 % low).
-* Kp comes out 1.1-1.6 % below ANDES's 2.0 on these noise-free recordings with an interval
-  narrower than that (1 % model error): on the joint runs it is rejected and changed even when
-  it is not the planted one. That is the playback's own remaining error against ANDES in the
-  voltage loop (Q RMS 0.004-0.03 % of MBASE, a steady 0.0003 pu after the load step and shed;
-  not diagnosed further); `--model-error=0.02` shows the same runs with 2 %."""
+* ANDES integrates these recordings at h = 0.625 ms (`generate.py`): at 2.5 ms its trapezoid's
+  switching step left REPCA1's PI a steady 3e-4 pu of Q after the load step and shed, and the
+  calibrated Kp came out 1.1-1.6 % low (rejected and changed even where not planted); at 0.625 ms
+  the Q RMS is 0.0006-0.007 % of MBASE. `--model-error=0.02` shows the same runs with 2 %."""
 
 
 GFM_NOTES = """## Notes
