@@ -131,7 +131,14 @@ def block() -> str:
             f"pass on {100 * iv[0]['pass_rate']:.0f} % (REPCA1 off) and {100 * iv[1]['pass_rate']:.0f} % "
             f"(REPCA1 on) of the recordings. Planted errors, REPCA1 off: {planted(iv[0])}. REPCA1 on, the "
             f"default model error: {planted(iv[1])}. With `model_error` {iv[2]['model_error']:g}: "
-            f"{planted(iv[2])}.")
+            f"{planted(iv[2])}."
+            + ("" if not (w := load("experiments/andes_ibr_validate/results_andes_ibr_wind.json")) else
+               f" Type-3 wind (`andes_ibr_wind`): the true records pass on {100 * w['pass_rate']:.0f} % of "
+               f"{len(w['per_recording'])} recordings; {planted(w)}.")
+            + ("" if not (g := load("experiments/andes_ibr_validate/results_andes_gfm.json")) else
+               f" Grid-forming REGCV1 (`andes_gfm`): the true records pass on {100 * g['pass_rate']:.0f} % "
+               "of "
+               f"{len(g['per_recording'])} recordings; {planted(g)}."))
     pb = load("experiments/andes_bench/playback.json")
     if pb:
         s = pb["summary"]

@@ -1,7 +1,8 @@
 """``jaxdse validate`` on the inverter-based plant of ``generate.py`` (REGCA1 + REECA1 + REPCA1,
 ANDES 2.0.0): the true records against every recording, and planted errors found again.
 
-    .venv/bin/python experiments/andes_ibr_validate/run.py [andes_ibr] [--joint] [--model-error=X]
+    .venv/bin/python experiments/andes_ibr_validate/run.py [andes_ibr|andes_gfm|andes_ibr_wind] [--joint]
+        [--model-error=X]
 
 ``--joint``: also the true records on all recordings jointly; ``--model-error=X``: [calibrate]
 model_error = X (default 1 %), results_model_error_X.*.
@@ -9,6 +10,8 @@ model_error = X (default 1 %), results_model_error_X.*.
 records match ANDES within 0.01 % of MBASE): three recordings, planted Kqv only.
 ``andes_gfm``: the grid-forming converter of ``experiments/andes_gfm`` (ANDES REGCV1 at bus 8, its
 record written from truth.json in ANDES's parameter order): three recordings, planted M = 2H.
+``andes_ibr_wind``: the type-3 wind plant of ``experiments/andes_ibr_wind`` (its seven records):
+four recordings, planted Kqv (the fault and the dip take |V| below Vdip).
 
 1. Pass rate: the true plant.dyr validated on each recording alone; a recording passes when
    ``jaxdse validate`` files no change (outcome "consistent with the .dyr" or "nothing
@@ -47,7 +50,9 @@ CASE = ROOT / "experiments" / "andes_bench" / "data" / "ieee14"
 # the REPCA1 bench has three events; Kqv (a voltage dip) is planted on the andes_ibr bench
 BENCHES = {"andes_ibr_validate": (HERE, ("linetrip", "loadstep", "loadshed"), ".csv.gz"),
            "andes_ibr": (HERE.parent / "andes_ibr", ("linetrip", "loadstep", "fault", "dip"), ".csv"),
-           "andes_gfm": (HERE.parent / "andes_gfm", ("line_trip", "load_step", "gen_trip"), ".csv.gz")}
+           "andes_gfm": (HERE.parent / "andes_gfm", ("line_trip", "load_step", "gen_trip"), ".csv.gz"),
+           "andes_ibr_wind": (HERE.parent / "andes_ibr_wind", ("linetrip", "loadstep", "fault", "dip"),
+                              ".csv.gz")}
 BENCH = next((a for a in sys.argv[1:] if not a.startswith("-")), "andes_ibr_validate")
 MODEL_ERROR = next((float(a.split("=")[1]) for a in sys.argv[1:] if a.startswith("--model-error=")), None)
 """[calibrate] model_error (None: jaxdse's default, 1 %)."""
@@ -58,7 +63,8 @@ TAG = "B8_VSG" if BENCH == "andes_gfm" else "B8"
 COLS = (f'time = "time_s", frequency = "{TAG}/F", v_mag = "{TAG}/VM", v_ang = "{TAG}/VA", '
         f'i_mag = "{TAG}/IM", i_ang = "{TAG}/IA"')
 PLANTED = {"andes_ibr_validate": (("REPCA1", "Ddn"), ("REPCA1", "Kp"), ("REPCA1", "Ki")),
-           "andes_ibr": (("REECA1", "Kqv"),), "andes_gfm": (("REGCV1", "M"),)}[BENCH]
+           "andes_ibr": (("REECA1", "Kqv"),), "andes_gfm": (("REGCV1", "M"),),
+           "andes_ibr_wind": (("REECA1", "Kqv"),)}[BENCH]
 """andes_gfm: the grid-forming converter's virtual inertia M = 2H (H planted x0.7 and x1.3)."""
 FACTORS = (0.7, 1.3)
 # PSS/E order of the records' values after ``bus 'MODEL' id`` (jaxdse.IBR_FIELDS)
