@@ -343,7 +343,9 @@ def osl_live_figure(per: dict, floor: float, path: Path) -> None:
         ax.step(t, e, where="post", color="C0", label="E (measured units: identified H)")
         ax.step(t, com, where="post", color="C3", ls="--", label="commitment figure (.dyr H)")
         if a == "system":
-            ax.axhline(floor / 1e3, color="k", ls=":", label=f"floor {floor / 1e3:.0f} GW s")
+            floor_line = ax.axhline(floor / 1e3, color="k", ls=":",
+                                    label=f"alarm floor {floor / 1e3:.0f} GW s")
+            ax.legend(handles=[floor_line], fontsize=7, loc="center right")
         share = np.median([x["measured_share"] for x in v])
         ax.set_ylabel(f"{a}\nE [GW s]")
         ax.set_title(f"{a}: {int(np.median([x['units_online'] for x in v]))} units online, "
