@@ -139,6 +139,9 @@ import andes
 import numpy as np
 
 HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE.parent / "andes_ibr"))
+import generate as base  # noqa: E402  (experiments/andes_ibr: its events and setter)
+
 FRAME_S = 0.01
 T_END_S = 8.0
 TSTEP_S = 0.001
@@ -190,23 +193,8 @@ def andes_values() -> dict[str, dict[str, float]]:
     }
 
 
-LOAD = dict(bus=9, Vn=138.0, g=0.3, b=-0.1)
-EVENTS = {
-    "linetrip": [("Toggle", dict(model="Line", dev="Line_11", t=1.0))],
-    "loadstep": [("Shunt", dict(idx="Shunt_step", u=0, **LOAD)),
-                 ("Toggle", dict(model="Shunt", dev="Shunt_step", t=1.0))],
-    "fault": [("Fault", dict(bus=9, tf=1.0, tc=1.1, xf=0.05, rf=0.0))],
-    "dip": [("Fault", dict(bus=9, tf=1.0, tc=1.1, xf=0.3, rf=0.0))],
-}
-
-
-def _set(ss, model: str, values: dict):
-    mdl = getattr(ss, model)
-    idx = mdl.idx.v[0]
-    for name, value in values.items():
-        if name not in mdl.params:
-            raise KeyError(f"{model}.{name} not in ANDES's parameters")
-        mdl.set(name, idx, float(value), base="device")
+EVENTS = base.EVENTS       # the PV bench's four events (line 7-9, the bus-9 shunt, the two faults)
+_set = base._set           # a record's constants set on the ANDES device, by PSS/E name
 
 
 def simulate(event: str, values: dict | None = None) -> tuple[dict[str, np.ndarray], dict]:
