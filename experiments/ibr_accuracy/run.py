@@ -128,7 +128,7 @@ def _limits(folder: Path, event: str, v, unit) -> list[str]:
     return out
 
 
-def _unit(folder: Path, name: str):
+def _unit(folder: Path):
     """The bench's unit: its plant.dyr through the .dyr reader, or a grid-forming converter's
     record from its truth.json (ANDES's constants; PSS/E has no REGCV1/REGCV2 record)."""
     if (folder / "plant.dyr").exists():
@@ -144,7 +144,7 @@ def main():
     chains = []
     for chain, bench, events, suffix, switchings in CHAINS:
         folder = EXP / bench
-        unit, meta = _unit(folder, bench)
+        unit, meta = _unit(folder)
         rows = []
         for event in events:
             t, v, ang, f_dev, p, q = (
